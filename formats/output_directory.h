@@ -1,0 +1,42 @@
+#pragma once
+// OutputDirectory: writes a whole output (tileset.json, tiles, report) into a staging
+// directory beside the target and moves it into place only when everything is written, so
+// a failed or interrupted run never leaves a tileset.json that points at missing or
+// half-written tiles.
+//
+// The target must not exist, be empty, or (with force) hold a previous output (a
+// tileset.json); any other non-empty directory is refused even with force, so a typo in -o
+// cannot delete unrelated data. Throws Error(Output) with the path and the fix.
+
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+
+namespace terratiles {
+
+class OutputDirectory {
+ public:
+  OutputDirectory(const std::filesystem::path& target, bool force);
+  ~OutputDirectory();  // removes the staging directory unless committed
+  OutputDirectory(const OutputDirectory&) = delete;
+  OutputDirectory& operator=(const OutputDirectory&) = delete;
+
+  // Writes `relative_path` (e.g. "tiles/3/4/2.glb") inside the staging directory, through
+  // a temporary name renamed when complete. Returns the number of bytes written.
+  std::size_t writeFile(const std::string& relative_path, std::span<const std::uint8_t> bytes);
+  std::size_t writeFile(const std::string& relative_path, const std::string& text);
+
+  // Moves the staged output into place (replacing a previous output when forced).
+  void commit();
+
+  const std::filesystem::path& target() const { return target_; }
+  const std::filesystem::path& staging() const { return staging_; }
+
+ private:
+  std::filesystem::path target_;
+  std::filesystem::path staging_;
+  bool committed_ = false;
+};
+
+}  // namespace terratiles

@@ -1,0 +1,281 @@
+#include "src/pipeline/run_pipeline.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <numbers>
+
+#include "formats/dem/read_dem.h"
+#include "formats/gltf/write_glb.h"
+#include "formats/output_directory.h"
+#include "src/base/error.h"
+#include "src/base/version.h"
+#include "src/geo/crs_transform.h"
+#include "src/lod/grid_pyramid.h"
+#include "tileset/tileset.h"
+
+namespace terratiles {
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+void validateOptions(const BuildOptions& options) {
+  if (options.inputs.empty()) throw Error(ErrorCode::Usage, "no input raster given");
+  if (options.output_dir.empty()) throw Error(ErrorCode::Usage, "no output directory given (-o OUTDIR)");
+  if (options.tile_cells < 2 || options.tile_cells > 4096) {
+    throw Error(ErrorCode::Usage, "--tile-cells is " + std::to_string(options.tile_cells) +
+                                      "; expected 2 to 4096");
+  }
+  if (options.max_zoom > 20) {
+    throw Error(ErrorCode::Usage,
+                "--max-zoom is " + std::to_string(options.max_zoom) + "; expected 0 to 20");
+  }
+  const double bits = std::log2(options.position_step_m);
+  if (!(options.position_step_m > 0) || bits != std::round(bits) || bits > 0 || bits < -16) {
+    throw Error(ErrorCode::Usage, "--position-step must be a power of two between 1/65536 and 1 m");
+  }
+}
+
+// A level's vertices on the globe: geodetic for bounding regions, ECEF for the meshes,
+// unit normals in ECEF from the whole level mesh so shading is continuous across tiles.
+struct PlacedLevel {
+  std::vector<GeodeticPoint> geodetic;
+  std::vector<EcefPoint> ecef;
+  std::vector<EcefPoint> normals;
+};
+
+PlacedLevel placeLevel(const DemGrid& dem, const TinMesh& mesh, const CrsToWgs84& to_wgs84) {
+  PlacedLevel placed;
+  const std::size_t n = mesh.vertices.size();
+  std::vector<CrsPoint> crs(n);
+  placed.geodetic.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    crs[i] = dem.pixelCentre(mesh.vertices[i].col, mesh.vertices[i].row);
+    // Heights go in as they are; orthometric-to-ellipsoidal (geoid) is a separate stage.
+    placed.geodetic[i].height_m = mesh.vertices[i].height_m;
+  }
+  to_wgs84.transform(crs, placed.geodetic);
+  placed.ecef.resize(n);
+  geodeticToEcef(placed.geodetic, placed.ecef);
+
+  placed.normals.assign(n, EcefPoint{});
+  const auto& idx = mesh.triangle_indices;
+  for (std::size_t t = 0; t < idx.size(); t += 3) {
+    const EcefPoint& a = placed.ecef[idx[t]];
+    const EcefPoint& b = placed.ecef[idx[t + 1]];
+    const EcefPoint& c = placed.ecef[idx[t + 2]];
+    const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+    const double vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
+    const EcefPoint face{uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};  // area-weighted
+    for (std::size_t k = 0; k < 3; ++k) {
+      EcefPoint& nrm = placed.normals[idx[t + k]];
+      nrm.x += face.x;
+      nrm.y += face.y;
+      nrm.z += face.z;
+    }
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    EcefPoint& nrm = placed.normals[i];
+    double length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+    if (length == 0) {  // an unused vertex: the ellipsoid normal
+      const double lat = placed.geodetic[i].lat_deg * kDegToRad;
+      const double lon = placed.geodetic[i].lon_deg * kDegToRad;
+      nrm = {std::cos(lat) * std::cos(lon), std::cos(lat) * std::sin(lon), std::sin(lat)};
+      length = 1;
+    }
+    nrm.x /= length;
+    nrm.y /= length;
+    nrm.z /= length;
+  }
+  return placed;
+}
+
+struct EncodedTile {
+  std::vector<std::uint8_t> glb;
+  Region region;
+  std::size_t vertices = 0;
+};
+
+// One tile's content: its vertices relative to an origin on the quantisation grid, in the
+// glTF y-up frame (glTF (x, y, z) = ECEF (X, Z, -Y); 3D Tiles rotates y-up back to z-up).
+EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const GlbOptions& glb) {
+  EncodedTile out;
+  std::map<std::uint32_t, std::uint32_t> local_of;  // level vertex -> tile vertex
+  std::vector<std::uint32_t> level_vertex;
+  GlbMesh mesh;
+  mesh.triangle_indices.reserve(tile.triangle_indices.size());
+  for (std::uint32_t v : tile.triangle_indices) {
+    auto [it, inserted] = local_of.try_emplace(v, static_cast<std::uint32_t>(level_vertex.size()));
+    if (inserted) level_vertex.push_back(v);
+    mesh.triangle_indices.push_back(it->second);
+  }
+  EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (std::uint32_t v : level_vertex) {
+    const EcefPoint& p = placed.ecef[v];
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    const GeodeticPoint& g = placed.geodetic[v];
+    out.region.include(g.lon_deg * kDegToRad, g.lat_deg * kDegToRad, g.height_m);
+  }
+  const double step = glb.position_step_m;
+  const EcefPoint origin{snapToStep((lo.x + hi.x) / 2, step), snapToStep((lo.y + hi.y) / 2, step),
+                         snapToStep((lo.z + hi.z) / 2, step)};
+  mesh.translation = {origin.x, origin.z, -origin.y};
+  mesh.positions.reserve(level_vertex.size() * 3);
+  mesh.normals.reserve(level_vertex.size() * 3);
+  for (std::uint32_t v : level_vertex) {
+    const EcefPoint& p = placed.ecef[v];
+    const EcefPoint& n = placed.normals[v];
+    mesh.positions.insert(mesh.positions.end(), {static_cast<float>(p.x - origin.x),
+                                                 static_cast<float>(p.z - origin.z),
+                                                 static_cast<float>(-(p.y - origin.y))});
+    mesh.normals.insert(mesh.normals.end(),
+                        {static_cast<float>(n.x), static_cast<float>(n.z), static_cast<float>(-n.y)});
+  }
+  out.vertices = level_vertex.size();
+  out.glb = encodeGlb(mesh, glb);
+  return out;
+}
+
+// Attaches `node` under its ancestors in `nodes`, creating content-less ancestors if needed.
+TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes, int max_zoom) {
+  for (int zoom = max_zoom; zoom > 0; --zoom) {
+    std::vector<std::tuple<int, int, int>> at_zoom;
+    for (const auto& [key, node] : nodes) {
+      if (std::get<0>(key) == zoom) at_zoom.push_back(key);
+    }
+    for (const auto& key : at_zoom) {
+      TileNode child = std::move(nodes.at(key));
+      nodes.erase(key);
+      const TileKey parent_key = child.key.parent();
+      TileNode& parent = nodes[{parent_key.zoom, parent_key.y, parent_key.x}];
+      parent.key = parent_key;
+      parent.children.push_back(std::move(child));
+    }
+  }
+  TERRATILES_ASSERT(nodes.size() == 1);
+  TileNode root = std::move(nodes.begin()->second);
+  return root;
+}
+
+}  // namespace
+
+BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  validateOptions(options);
+  OutputDirectory output(options.output_dir, options.force);
+
+  progress.beginStage("reading DEM", 0);
+  const DemGrid dem = readDem(options.inputs);
+  const DemStatistics stats = computeStatistics(dem);
+  const CrsToWgs84 to_wgs84(dem.crs_wkt);
+  progress.endStage();
+
+  BuildSummary summary;
+  summary.output_dir = options.output_dir;
+  summary.crs_name = dem.crs_name;
+  summary.width = dem.width;
+  summary.height = dem.height;
+  summary.pixel_size = dem.pixel_size_x;
+  summary.valid_pixels = stats.valid_pixels;
+  summary.min_height_m = stats.min_height_m;
+  summary.max_height_m = stats.max_height_m;
+  {
+    GeodeticPoint centre;
+    centre.height_m = (stats.min_height_m + stats.max_height_m) / 2;
+    const CrsPoint c = dem.pixelCentre((dem.width - 1) / 2.0, (dem.height - 1) / 2.0);
+    to_wgs84.transform(std::span<const CrsPoint>(&c, 1), std::span<GeodeticPoint>(&centre, 1));
+    summary.centre_lon_deg = centre.lon_deg;
+    summary.centre_lat_deg = centre.lat_deg;
+  }
+
+  GridPyramidOptions pyramid_options;
+  pyramid_options.tile_cells = options.tile_cells;
+  pyramid_options.max_zoom = options.max_zoom;
+  const GridPyramid pyramid = buildGridPyramid(dem, pyramid_options, progress);
+  const int max_zoom = static_cast<int>(pyramid.levels.size()) - 1;
+  if (pyramid.levels.back().tiles.empty()) {
+    throw Error(ErrorCode::Input, options.inputs.front() +
+                                      ": no triangle can be built; expected at least one 2 x 2 "
+                                      "block of valid (not nodata) pixels");
+  }
+
+  GlbOptions glb;
+  glb.draco = options.draco;
+  glb.position_step_m = options.position_step_m;
+  glb.generator = std::string("terratiles ") + kVersion;
+
+  std::size_t total_tiles = 0;
+  for (const auto& level : pyramid.levels) total_tiles += level.tiles.size();
+  progress.beginStage("writing tiles", total_tiles);
+  std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
+  for (const PyramidLevel& level : pyramid.levels) {
+    const PlacedLevel placed = placeLevel(dem, level.mesh, to_wgs84);
+    ZoomSummary zoom_summary;
+    zoom_summary.zoom = level.zoom;
+    zoom_summary.step_pixels = level.step;
+    zoom_summary.tiles = level.tiles.size();
+    zoom_summary.vertices = level.mesh.vertices.size();
+    zoom_summary.triangles = level.mesh.triangleCount();
+    zoom_summary.max_error_m = level.max_error_m;
+    zoom_summary.rms_error_m = level.rms_error_m;
+
+    // Encode in parallel batches into pre-sized slots (output identical for any thread
+    // count), write and report progress from this thread.
+    constexpr std::size_t kBatch = 16;
+    for (std::size_t begin = 0; begin < level.tiles.size(); begin += kBatch) {
+      const std::size_t end = std::min(level.tiles.size(), begin + kBatch);
+      std::vector<EncodedTile> encoded(end - begin);
+      tbb::parallel_for(begin, end, [&](std::size_t i) {
+        encoded[i - begin] = encodeTile(level.tiles[i], placed, glb);
+      });
+      for (std::size_t i = begin; i < end; ++i) {
+        const PyramidTile& tile = level.tiles[i];
+        TileNode node;
+        node.key = tile.key;
+        node.content_uri = "tiles/" + tile.key.path() + ".glb";
+        node.region = encoded[i - begin].region;
+        node.geometric_error_m = tile.max_error_m;
+        zoom_summary.bytes += output.writeFile(node.content_uri, encoded[i - begin].glb);
+        nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
+        progress.advance();
+      }
+    }
+    summary.tiles += zoom_summary.tiles;
+    summary.triangles += zoom_summary.triangles;
+    summary.bytes += zoom_summary.bytes;
+    if (level.zoom < max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, level.max_error_m);
+    summary.zooms.push_back(zoom_summary);
+  }
+  progress.endStage();
+
+  Tileset tileset;
+  tileset.generator = glb.generator;
+  tileset.root = buildTree(nodes, max_zoom);
+  finalizeTree(tileset.root);
+  // The error of drawing nothing: the terrain's full relief above or below the ellipsoid.
+  tileset.geometric_error_m =
+      std::max({tileset.root.geometric_error_m, tileset.root.region.max_height_m - tileset.root.region.min_height_m,
+                std::fabs(tileset.root.region.max_height_m), std::fabs(tileset.root.region.min_height_m)});
+  // Record per zoom the largest geometricError written (after finalizeTree raised them).
+  std::vector<const TileNode*> stack{&tileset.root};
+  while (!stack.empty()) {
+    const TileNode* node = stack.back();
+    stack.pop_back();
+    auto& z = summary.zooms[static_cast<std::size_t>(node->key.zoom)];
+    z.geometric_error_m = std::max(z.geometric_error_m, node->geometric_error_m);
+    for (const TileNode& child : node->children) stack.push_back(&child);
+  }
+
+  // tileset.json last, then the whole directory moves into place.
+  summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
+  progress.throwIfCancelled();
+  output.commit();
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+}  // namespace terratiles

@@ -1,0 +1,124 @@
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <set>
+
+#include "formats/gltf/read_glb.h"
+#include "formats/gltf/write_glb.h"
+
+using namespace terratiles;
+
+namespace {
+// A small terrain-like patch of n x n vertices, translated far from the origin as ECEF is.
+GlbMesh patch(int n, std::array<double, 3> translation) {
+  GlbMesh mesh;
+  mesh.translation = translation;
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      mesh.positions.insert(mesh.positions.end(),
+                            {i * 25.0f, static_cast<float>(std::sin(i * 0.3) * 40.0), j * -25.0f});
+      mesh.normals.insert(mesh.normals.end(), {0.0f, 1.0f, 0.0f});
+    }
+  }
+  for (int j = 0; j + 1 < n; ++j) {
+    for (int i = 0; i + 1 < n; ++i) {
+      const std::uint32_t a = j * n + i, b = a + 1, c = a + n, d = c + 1;
+      mesh.triangle_indices.insert(mesh.triangle_indices.end(), {a, b, d, a, d, c});
+    }
+  }
+  return mesh;
+}
+}  // namespace
+
+TEST_SUITE("formats") {
+  TEST_CASE("a Draco GLB decodes to the same triangles within half a quantisation step") {
+    const GlbMesh mesh = patch(20, {4325000.0, 4638000.0, -564000.0});
+    GlbOptions options;
+    const std::vector<std::uint8_t> bytes = encodeGlb(mesh, options);
+    const DecodedGlb decoded = decodeGlb(bytes, "patch.glb");
+    CHECK(decoded.draco);
+    CHECK(decoded.json.find("\"extensionsRequired\":[\"KHR_draco_mesh_compression\"]") !=
+          std::string::npos);
+    CHECK(decoded.mesh.translation == mesh.translation);
+    REQUIRE(decoded.mesh.triangle_indices.size() == mesh.triangle_indices.size());
+    // Draco reorders vertices: compare triangles as position triples.
+    std::multiset<std::array<long, 9>> expected, found;
+    auto key = [&](const GlbMesh& m, std::size_t t) {
+      std::array<long, 9> k{};
+      for (int c = 0; c < 3; ++c) {
+        for (int a = 0; a < 3; ++a) {
+          k[3 * c + a] = std::lround(m.positions[3 * m.triangle_indices[t + c] + a] / options.position_step_m);
+        }
+      }
+      // Rotate so the smallest corner comes first (Draco may rotate a face's corners).
+      std::array<long, 9> best = k;
+      for (int r = 1; r < 3; ++r) {
+        std::array<long, 9> rotated{};
+        for (int i = 0; i < 9; ++i) rotated[i] = k[(i + 3 * r) % 9];
+        best = std::min(best, rotated);
+      }
+      return best;
+    };
+    for (std::size_t t = 0; t < mesh.triangle_indices.size(); t += 3) expected.insert(key(mesh, t));
+    for (std::size_t t = 0; t < decoded.mesh.triangle_indices.size(); t += 3) {
+      found.insert(key(decoded.mesh, t));
+    }
+    CHECK(found == expected);
+    double worst = 0;
+    for (std::size_t v = 0; v < decoded.mesh.positions.size(); ++v) {
+      const double q = decoded.mesh.positions[v] / options.position_step_m;
+      worst = std::max(worst, std::fabs(q - std::round(q)));  // on the shared grid
+    }
+    CHECK(worst < 1e-3);
+  }
+
+  TEST_CASE("a vertex shared by two tiles decodes to one position in both") {
+    // Two tiles with different translations (both on the quantisation grid) hold the same
+    // absolute point; after Draco both must give it back bit for bit.
+    const double step = 1.0 / 128;
+    const std::array<double, 3> a_origin{4325000.0, 4638000.0, -564000.0};
+    const std::array<double, 3> b_origin{4325000.0 + 1000 * step * 128, 4638000.0, -564000.0 + 7.5};
+    const std::array<double, 3> shared{4325433.123, 4638021.987, -564100.456};
+    GlbMesh a = patch(3, a_origin), b = patch(3, b_origin);
+    for (int k = 0; k < 3; ++k) {
+      a.positions[k] = static_cast<float>(shared[k] - a_origin[k]);
+      b.positions[k] = static_cast<float>(shared[k] - b_origin[k]);
+    }
+    GlbOptions options;
+    const DecodedGlb da = decodeGlb(encodeGlb(a, options), "a.glb");
+    const DecodedGlb db = decodeGlb(encodeGlb(b, options), "b.glb");
+    auto nearest = [&](const DecodedGlb& d) {
+      std::array<double, 3> best{};
+      double best_distance = 1e300;
+      for (std::size_t v = 0; v < d.mesh.vertexCount(); ++v) {
+        std::array<double, 3> p;
+        for (int k = 0; k < 3; ++k) p[k] = d.mesh.translation[k] + d.mesh.positions[3 * v + k];
+        const double distance = std::hypot(p[0] - shared[0], p[1] - shared[1], p[2] - shared[2]);
+        if (distance < best_distance) best_distance = distance, best = p;
+      }
+      return best;
+    };
+    const auto pa = nearest(da), pb = nearest(db);
+    CHECK(pa == pb);
+    CHECK(std::hypot(pa[0] - shared[0], pa[1] - shared[1], pa[2] - shared[2]) < step);
+  }
+
+  TEST_CASE("a plain GLB keeps positions and indices exactly") {
+    const GlbMesh mesh = patch(5, {1.0, 2.0, 3.0});
+    GlbOptions options;
+    options.draco = false;
+    const DecodedGlb decoded = decodeGlb(encodeGlb(mesh, options), "plain.glb");
+    CHECK_FALSE(decoded.draco);
+    CHECK(decoded.mesh.positions == mesh.positions);
+    CHECK(decoded.mesh.normals == mesh.normals);
+    CHECK(decoded.mesh.triangle_indices == mesh.triangle_indices);
+  }
+
+  TEST_CASE("a truncated GLB is an input error not a crash") {
+    const std::vector<std::uint8_t> bytes = encodeGlb(patch(4, {0, 0, 0}), GlbOptions{});
+    for (std::size_t cut : {std::size_t{0}, std::size_t{11}, std::size_t{40}, bytes.size() - 7}) {
+      const std::vector<std::uint8_t> truncated(bytes.begin(), bytes.begin() + static_cast<long>(cut));
+      CHECK_THROWS_WITH(decodeGlb(truncated, "cut.glb"), doctest::Contains("cut.glb: malformed GLB"));
+    }
+  }
+}

@@ -1,0 +1,87 @@
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "src/base/error.h"
+#include "src/geo/crs_transform.h"
+#include "tests/test_support.h"
+
+using namespace terratiles;
+
+namespace {
+struct ReferencePoint {
+  std::string name;
+  double e, n, h, lon, lat, ecef_x, ecef_y, ecef_z;
+};
+
+// ../shared/data/reference/lv95_reference_points.csv: PROJ 9.1.1 results for 16 points.
+std::vector<ReferencePoint> readReferencePoints() {
+  std::ifstream in(test::sharedData("reference/lv95_reference_points.csv"));
+  std::vector<ReferencePoint> points;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line.rfind("name,", 0) == 0) continue;
+    std::stringstream fields(line);
+    std::vector<std::string> f;
+    std::string field;
+    while (std::getline(fields, field, ',')) f.push_back(field);
+    REQUIRE(f.size() >= 11);
+    points.push_back({f[0], std::stod(f[1]), std::stod(f[2]), std::stod(f[3]), std::stod(f[4]),
+                      std::stod(f[5]), std::stod(f[8]), std::stod(f[9]), std::stod(f[10])});
+  }
+  return points;
+}
+}  // namespace
+
+TEST_SUITE("geo") {
+  TEST_CASE("EPSG 2056 goes to WGS84 and ECEF as PROJ computes the reference points") {
+    const std::vector<ReferencePoint> points = readReferencePoints();
+    REQUIRE(points.size() == 16);
+    const CrsToWgs84 to_wgs84("EPSG:2056");
+    std::vector<CrsPoint> in;
+    for (const auto& p : points) in.push_back({p.e, p.n});
+    std::vector<GeodeticPoint> geodetic(in.size());
+    for (std::size_t i = 0; i < points.size(); ++i) geodetic[i].height_m = points[i].h;
+    to_wgs84.transform(in, geodetic);
+    for (std::size_t i = 0; i < points.size(); ++i) CHECK(geodetic[i].height_m == points[i].h);
+    std::vector<EcefPoint> ecef(in.size());
+    geodeticToEcef(geodetic, ecef);
+    double worst_deg = 0, worst_m = 0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      CAPTURE(points[i].name);
+      worst_deg = std::max({worst_deg, std::fabs(geodetic[i].lon_deg - points[i].lon),
+                            std::fabs(geodetic[i].lat_deg - points[i].lat)});
+      worst_m = std::max({worst_m, std::fabs(ecef[i].x - points[i].ecef_x),
+                          std::fabs(ecef[i].y - points[i].ecef_y),
+                          std::fabs(ecef[i].z - points[i].ecef_z)});
+    }
+    MESSAGE("worst lon/lat difference " << worst_deg << " deg, ECEF " << worst_m << " m");
+    CHECK(worst_deg < 1e-9);   // the CSV prints 1e-10 deg
+    CHECK(worst_m < 1e-3);
+  }
+
+  TEST_CASE("a projected CRS without an accurate path to WGS84 is refused") {
+    // A CRS on an unknown datum: PROJ could only offer a ballpark transformation.
+    const std::string custom =
+        "+proj=tmerc +lat_0=0 +lon_0=9 +k=1 +x_0=500000 +y_0=0 +a=6378000 +b=6357000 +units=m "
+        "+no_defs +type=crs";
+    try {
+      CrsToWgs84 transform(custom);
+      FAIL("a ballpark transformation was accepted");
+    } catch (const Error& e) {
+      CHECK(e.code() == ErrorCode::Input);
+      CHECK(std::string(e.what()).find("no accurate transformation") != std::string::npos);
+    }
+  }
+
+  TEST_CASE("geodetic to ECEF puts the equator and the pole on the WGS84 axes") {
+    std::vector<GeodeticPoint> in{{0, 0, 0}, {90, 0, 100}, {0, 90, 0}};
+    std::vector<EcefPoint> out(3);
+    geodeticToEcef(in, out);
+    CHECK(out[0].x == doctest::Approx(6378137.0));
+    CHECK(out[1].y == doctest::Approx(6378237.0));
+    CHECK(out[2].z == doctest::Approx(6356752.314245));
+  }
+}

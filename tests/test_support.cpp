@@ -1,0 +1,113 @@
+#include "tests/test_support.h"
+
+#include <gdal_priv.h>
+#include <ogr_spatialref.h>
+#include <stdlib.h>
+
+#include <array>
+#include <cstdio>
+#include <sstream>
+
+#include "tools/terratiles/run_cli.h"
+
+namespace terratiles::test {
+
+std::string sharedData(const std::string& relative) {
+  return std::string(TERRATILES_SHARED_DATA_DIR) + "/" + relative;
+}
+
+std::string sourceDir() { return TERRATILES_SOURCE_DIR; }
+
+TempDir::TempDir() {
+  std::string pattern = (std::filesystem::temp_directory_path() / "terratiles-test-XXXXXX").string();
+  char* made = mkdtemp(pattern.data());
+  if (!made) throw std::runtime_error("mkdtemp failed");
+  path_ = made;
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(path_, ec);
+}
+
+DemGrid makeDem(int width, int height, double pixel_m,
+                const std::function<double(int col, int row)>& height_m) {
+  DemGrid dem;
+  dem.width = width;
+  dem.height = height;
+  dem.origin_x = 2600000.0;
+  dem.origin_y = 1200000.0;
+  dem.pixel_size_x = pixel_m;
+  dem.pixel_size_y = pixel_m;
+  OGRSpatialReference srs;
+  srs.importFromEPSG(2056);
+  char* wkt = nullptr;
+  srs.exportToWkt(&wkt);
+  dem.crs_wkt = wkt;
+  CPLFree(wkt);
+  dem.crs_name = "EPSG:2056";
+  dem.heights_m.resize(dem.pixelCount());
+  for (int row = 0; row < height; ++row) {
+    for (int col = 0; col < width; ++col) {
+      dem.heights_m[dem.index(col, row)] = static_cast<float>(height_m(col, row));
+    }
+  }
+  return dem;
+}
+
+void writeGeoTiff(const DemGrid& dem, const std::string& path, bool with_crs) {
+  GDALAllRegister();
+  GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("GTiff");
+  GDALDataset* ds = driver->Create(path.c_str(), dem.width, dem.height, 1, GDT_Float32, nullptr);
+  double gt[6] = {dem.origin_x, dem.pixel_size_x, 0, dem.origin_y, 0, -dem.pixel_size_y};
+  ds->SetGeoTransform(gt);
+  if (with_crs) {
+    OGRSpatialReference srs;
+    srs.SetFromUserInput(dem.crs_wkt.c_str());
+    ds->SetSpatialRef(&srs);
+  }
+  std::vector<float> values = dem.heights_m;
+  for (float& v : values) {
+    if (std::isnan(v)) v = -9999.0f;
+  }
+  GDALRasterBand* band = ds->GetRasterBand(1);
+  band->SetNoDataValue(-9999.0);
+  if (band->RasterIO(GF_Write, 0, 0, dem.width, dem.height, values.data(), dem.width, dem.height,
+                     GDT_Float32, 0, 0, nullptr) != CE_None) {
+    throw std::runtime_error("cannot write test GeoTIFF " + path);
+  }
+  GDALClose(ds);
+}
+
+CliResult runTerratiles(const std::vector<std::string>& args) {
+  std::vector<std::string> argv{"terratiles"};
+  argv.insert(argv.end(), args.begin(), args.end());
+  std::ostringstream out, err;
+  CliResult result;
+  result.exit_code = runCli(argv, out, err);
+  result.out = out.str();
+  result.err = err.str();
+  return result;
+}
+
+GltfValidation validateGltfTree(const std::string& dir) {
+  GltfValidation result;
+  const std::string script = sourceDir() + "/tools/validators/validate_gltf.mjs";
+  const std::string command = "node '" + script + "' '" + dir + "' 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return result;
+  std::array<char, 4096> buffer;
+  while (fgets(buffer.data(), buffer.size(), pipe)) result.report += buffer.data();
+  const int status = pclose(pipe);
+  // Last line: "files N errors E warnings W".
+  const auto at = result.report.rfind("files ");
+  if (at != std::string::npos &&
+      std::sscanf(result.report.c_str() + at, "files %d errors %d warnings %d", &result.files,
+                  &result.errors, &result.warnings) == 3) {
+    result.ran = true;
+  }
+  if (status != 0 && result.errors == 0) result.ran = false;
+  return result;
+}
+
+}  // namespace terratiles::test

@@ -1,0 +1,104 @@
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "tests/test_support.h"
+
+using namespace terratiles;
+using test::runTerratiles;
+using test::sharedData;
+namespace fs = std::filesystem;
+
+namespace {
+const std::string kInterlaken = sharedData("ch_dhm25_interlaken_25m_2056.tif");
+
+// One line on stderr, starting with the program name.
+void checkOneLineError(const test::CliResult& result, const std::string& expected_part) {
+  CAPTURE(result.err);
+  CHECK(result.err.rfind("terratiles: error: ", 0) == 0);
+  CHECK(result.err.find('\n') == result.err.size() - 1);
+  CHECK(result.err.find(expected_part) != std::string::npos);
+}
+}  // namespace
+
+TEST_SUITE("cli") {
+  TEST_CASE("version and help succeed and document units defaults and exit codes") {
+    const auto version = runTerratiles({"--version"});
+    CHECK(version.exit_code == 0);
+    CHECK(version.out.rfind("terratiles 0.", 0) == 0);
+
+    const auto help = runTerratiles({"build", "--help"});
+    CHECK(help.exit_code == 0);
+    CHECK(help.out.find("--tile-cells") != std::string::npos);
+    CHECK(help.out.find("--tile-cells INT=128") != std::string::npos);  // default shown
+    CHECK(help.out.find("metres") != std::string::npos);
+    CHECK(help.out.find("Exit codes: 0 ok, 1 internal error, 2 usage, 3 bad input, 4 output") !=
+          std::string::npos);
+  }
+
+  TEST_CASE("usage errors exit 2 with one line") {
+    const auto unknown = runTerratiles({"build", kInterlaken, "-o", "x", "--frobnicate"});
+    CHECK(unknown.exit_code == 2);
+    checkOneLineError(unknown, "--frobnicate");
+
+    const auto no_output = runTerratiles({"build", kInterlaken});
+    CHECK(no_output.exit_code == 2);
+    checkOneLineError(no_output, "--output");
+
+    const auto no_command = runTerratiles({});
+    CHECK(no_command.exit_code == 2);
+    checkOneLineError(no_command, "subcommand");
+
+    test::TempDir dir;
+    const auto bad_value = runTerratiles({"build", kInterlaken, "-o", dir / "out", "--tile-cells", "1"});
+    CHECK(bad_value.exit_code == 2);
+    checkOneLineError(bad_value, "--tile-cells is 1; expected 2 to 4096");
+    CHECK_FALSE(fs::exists(dir.path() / "out"));
+  }
+
+  TEST_CASE("bad inputs exit 3 and leave no output behind") {
+    test::TempDir dir;
+    const std::string out = dir / "out";
+
+    const auto missing = runTerratiles({"build", "/nonexistent/dem.tif", "-o", out});
+    CHECK(missing.exit_code == 3);
+    checkOneLineError(missing, "/nonexistent/dem.tif: no such file; check the path");
+
+    std::ofstream(dir / "notes.txt") << "this is not a raster\n";
+    const auto not_raster = runTerratiles({"build", dir / "notes.txt", "-o", out});
+    CHECK(not_raster.exit_code == 3);
+    checkOneLineError(not_raster, "notes.txt: not a raster that GDAL can read");
+
+    const DemGrid dem = test::makeDem(16, 16, 2.0, [](int c, int r) { return 500.0 + c - r; });
+    test::writeGeoTiff(dem, dir / "nocrs.tif", false);
+    const auto no_crs = runTerratiles({"build", dir / "nocrs.tif", "-o", out});
+    CHECK(no_crs.exit_code == 3);
+    checkOneLineError(no_crs, "nocrs.tif: raster has no coordinate reference system");
+
+    CHECK_FALSE(fs::exists(out));
+    // Nothing else was left in the parent either (no staging directory).
+    std::size_t entries = 0;
+    for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir.path())) ++entries;
+    CHECK(entries == 2);  // notes.txt and nocrs.tif
+  }
+
+  TEST_CASE("unwritable or occupied output directories exit 4") {
+    test::TempDir dir;
+    std::ofstream(dir / "file") << "x";
+    const auto below_file = runTerratiles({"build", kInterlaken, "-o", dir / "file/out"});
+    CHECK(below_file.exit_code == 4);
+    checkOneLineError(below_file, "cannot create the parent directory");
+
+    const auto in_proc = runTerratiles({"build", kInterlaken, "-o", "/proc/terratiles-out"});
+    CHECK(in_proc.exit_code == 4);
+    checkOneLineError(in_proc, "/proc/terratiles-out");
+
+    fs::create_directories(dir.path() / "busy");
+    std::ofstream(dir / "busy/data.txt") << "x";
+    const auto busy = runTerratiles({"build", kInterlaken, "-o", dir / "busy"});
+    CHECK(busy.exit_code == 4);
+    checkOneLineError(busy, "output directory is not empty; use --force");
+    CHECK_FALSE(fs::exists(dir.path() / "busy/tileset.json"));
+  }
+}

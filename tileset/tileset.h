@@ -1,0 +1,48 @@
+#pragma once
+// The 3D Tiles 1.1 model we write (explicit tiling) and its tileset.json writer.
+//
+// Bounding volumes are regions (3D Tiles spec 1.1, "Region": west, south, east, north in
+// radians on WGS84, min and max height in metres above the ellipsoid). finalizeTree grows
+// every region to contain its children's and raises every geometricError to at least its
+// children's, so the tree is consistent whatever order tiles were added in.
+
+#include <string>
+#include <vector>
+
+#include "src/tiling/tile_key.h"
+
+namespace terratiles {
+
+struct Region {
+  double west_rad = 0;
+  double south_rad = 0;
+  double east_rad = 0;
+  double north_rad = 0;
+  double min_height_m = 0;
+  double max_height_m = 0;
+  bool empty = true;
+
+  void include(double lon_rad, double lat_rad, double height_m);
+  void include(const Region& other);
+};
+
+struct TileNode {
+  TileKey key;
+  std::string content_uri;      // relative to tileset.json; empty for a tile without content
+  Region region;                // of the content, grown by finalizeTree to the children's
+  double geometric_error_m = 0; // measured content error, raised by finalizeTree
+  std::vector<TileNode> children;
+};
+
+struct Tileset {
+  TileNode root;
+  double geometric_error_m = 0;  // error of drawing nothing at all
+  std::string generator;         // asset.generator, e.g. "terratiles 0.1.0"
+};
+
+void finalizeTree(TileNode& node);
+
+// tileset.json text: asset.version "1.1", refine REPLACE on the root (inherited).
+std::string tilesetToJson(const Tileset& tileset);
+
+}  // namespace terratiles

@@ -1,0 +1,175 @@
+#include "tools/terratiles/run_cli.h"
+
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <csignal>
+#include <cstdio>
+#include <iomanip>
+#include <ostream>
+#include <sstream>
+
+#include "src/base/error.h"
+#include "src/base/progress.h"
+#include "src/base/version.h"
+#include "src/pipeline/run_pipeline.h"
+
+namespace terratiles {
+namespace {
+
+constexpr const char* kExitCodes =
+    "Exit codes: 0 ok, 1 internal error, 2 usage, 3 bad input, 4 output not writable, "
+    "130 interrupted.";
+
+extern "C" void onInterrupt(int) { Progress::requestCancel(); }
+
+// Installs the SIGINT handler for the duration of one command.
+class InterruptGuard {
+ public:
+  InterruptGuard() {
+    Progress::resetCancel();
+    previous_ = std::signal(SIGINT, onInterrupt);
+  }
+  ~InterruptGuard() { std::signal(SIGINT, previous_); }
+
+ private:
+  void (*previous_)(int);
+};
+
+std::string humanBytes(std::size_t bytes) {
+  std::ostringstream text;
+  text.imbue(std::locale::classic());
+  text << std::fixed << std::setprecision(1);
+  if (bytes >= (1u << 20)) {
+    text << static_cast<double>(bytes) / (1u << 20) << " MiB";
+  } else {
+    text << static_cast<double>(bytes) / 1024.0 << " KiB";
+  }
+  return text.str();
+}
+
+void printSummary(const BuildSummary& s, std::ostream& err) {
+  std::ostringstream text;
+  text.imbue(std::locale::classic());
+  text << std::fixed;
+  text << "terratiles: built " << s.output_dir << "/tileset.json\n";
+  text << "  input    " << s.width << " x " << s.height << " px, " << std::setprecision(6)
+       << s.pixel_size << " " << s.crs_name << ", heights " << std::setprecision(1)
+       << s.min_height_m << " .. " << s.max_height_m << " m, centre " << std::setprecision(5)
+       << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
+  text << "  zoom  step  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
+  for (const ZoomSummary& z : s.zooms) {
+    text << "  " << std::setw(4) << z.zoom << std::setw(6) << z.step_pixels << std::setw(7)
+         << z.tiles << std::setw(12) << z.triangles << std::setw(13) << z.bytes
+         << std::setprecision(3) << std::setw(12) << z.max_error_m << std::setw(12)
+         << z.rms_error_m << std::setw(13) << z.geometric_error_m << "\n";
+  }
+  text << "  total " << s.tiles << " tiles, " << s.triangles << " triangles, "
+       << humanBytes(s.bytes) << ", worst measured error " << std::setprecision(2)
+       << s.worst_error_m << " m, " << s.seconds << " s\n";
+  text << "  view it: node samples/viewer/serve.mjs " << s.output_dir
+       << "  (then open the printed URL; see README)\n";
+  err << text.str() << std::flush;
+}
+
+ProgressMode progressModeFor(const std::string& choice, bool quiet) {
+  if (quiet || choice == "none") return ProgressMode::Quiet;
+  if (choice == "json") return ProgressMode::Json;
+  if (choice == "bar") return ProgressMode::Bar;
+  return ::isatty(STDERR_FILENO) ? ProgressMode::Bar : ProgressMode::Quiet;
+}
+
+int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+  CLI::App app{"terratiles " + std::string(kVersion) +
+                   ": DEM rasters to seamless multi-level-of-detail 3D Tiles terrain "
+                   "(Draco glTF tiles and tileset.json for CesiumJS).",
+               "terratiles"};
+  app.footer(kExitCodes);
+  app.set_version_flag("--version", std::string("terratiles ") + kVersion);
+  app.require_subcommand(1);
+
+  BuildOptions build;
+  bool quiet = false;
+  std::string progress_choice = "auto";
+  CLI::App* build_command = app.add_subcommand(
+      "build", "Turn one or several adjacent DEM rasters into a 3D Tiles tileset");
+  build_command->footer(kExitCodes);
+  build_command
+      ->add_option("INPUT", build.inputs,
+                   "DEM rasters GDAL reads (GeoTIFF, .hgt, ...), any CRS with an EPSG code; "
+                   "several adjacent files are mosaicked")
+      ->required();
+  build_command->add_option("-o,--output", build.output_dir, "Output directory (tileset.json, tiles/)")
+      ->required();
+  build_command->add_flag("-f,--force", build.force,
+                          "Replace OUTDIR when it holds a previous output (tileset.json)");
+  build_command
+      ->add_option("--tile-cells", build.tile_cells,
+                   "Grid cells per tile side at every zoom; a tile holds up to 2*N^2 triangles")
+      ->capture_default_str();
+  build_command
+      ->add_option("--max-zoom", build.max_zoom,
+                   "Finest zoom (-1: as many zooms as one root tile needs)")
+      ->capture_default_str();
+  build_command->add_flag("--no-draco", [&build](std::int64_t) { build.draco = false; },
+                          "Write plain GLB without KHR_draco_mesh_compression");
+  build_command
+      ->add_option("--position-step", build.position_step_m,
+                   "Draco position quantisation step in metres (power of two), shared by all "
+                   "tiles")
+      ->capture_default_str();
+  build_command->add_flag("-q,--quiet", quiet, "No progress and no summary on stderr");
+  build_command
+      ->add_option("--progress", progress_choice,
+                   "Progress on stderr: auto (a bar on a terminal, else nothing), bar, json, none")
+      ->check(CLI::IsMember({"auto", "bar", "json", "none"}))
+      ->capture_default_str();
+
+  try {
+    std::vector<const char*> argv;
+    for (const auto& arg : args) argv.push_back(arg.c_str());
+    app.parse(static_cast<int>(argv.size()), argv.data());
+  } catch (const CLI::CallForHelp&) {
+    out << (app.get_subcommands().empty() ? app.help() : app.get_subcommands().front()->help());
+    return 0;
+  } catch (const CLI::CallForAllHelp&) {
+    out << app.help("", CLI::AppFormatMode::All);
+    return 0;
+  } catch (const CLI::CallForVersion&) {
+    out << "terratiles " << kVersion << "\n";
+    return 0;
+  } catch (const CLI::ParseError& e) {
+    std::string message = e.what();
+    std::replace(message.begin(), message.end(), '\n', ' ');
+    const std::string command = app.get_subcommands().empty() ? "" : " build";
+    throw Error(ErrorCode::Usage, message + " (see 'terratiles" + command + " --help')");
+  }
+
+  if (build_command->parsed()) {
+    Progress progress(progressModeFor(progress_choice, quiet));
+    InterruptGuard interrupt_guard;
+    const BuildSummary summary = runPipeline(build, progress);
+    if (!quiet) printSummary(summary, err);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int runCli(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+  try {
+    return runCliOrThrow(args, out, err);
+  } catch (const Error& e) {
+    err << "terratiles: error: " << e.what() << "\n";
+    return exitCodeFor(e.code());
+  } catch (const std::bad_alloc&) {
+    err << "terratiles: error: out of memory; try a smaller input or --tile-cells\n";
+    return exitCodeFor(ErrorCode::Internal);
+  } catch (const std::exception& e) {
+    err << "terratiles: error: internal: " << e.what() << "\n";
+    return exitCodeFor(ErrorCode::Internal);
+  }
+}
+
+}  // namespace terratiles
