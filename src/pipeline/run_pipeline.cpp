@@ -7,13 +7,16 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <optional>
 
 #include "formats/dem/read_dem.h"
+#include "formats/geoid/read_geoid.h"
 #include "formats/gltf/write_glb.h"
 #include "formats/output_directory.h"
 #include "src/base/error.h"
 #include "src/base/version.h"
 #include "src/geo/crs_transform.h"
+#include "src/geo/geoid.h"
 #include "src/lod/grid_pyramid.h"
 #include "tileset/tileset.h"
 
@@ -47,17 +50,30 @@ struct PlacedLevel {
   std::vector<EcefPoint> normals;
 };
 
-PlacedLevel placeLevel(const DemGrid& dem, const TinMesh& mesh, const CrsToWgs84& to_wgs84) {
+PlacedLevel placeLevel(const DemGrid& dem, const TinMesh& mesh, const CrsToWgs84& to_wgs84,
+                       const GeoidGrid* geoid) {
   PlacedLevel placed;
   const std::size_t n = mesh.vertices.size();
   std::vector<CrsPoint> crs(n);
   placed.geodetic.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     crs[i] = dem.pixelCentre(mesh.vertices[i].col, mesh.vertices[i].row);
-    // Heights go in as they are; orthometric-to-ellipsoidal (geoid) is a separate stage.
     placed.geodetic[i].height_m = mesh.vertices[i].height_m;
   }
   to_wgs84.transform(crs, placed.geodetic);
+  if (geoid) {  // orthometric -> WGS84 ellipsoidal: h = H + N(lon, lat)
+    for (GeodeticPoint& p : placed.geodetic) {
+      const std::optional<double> undulation = geoid->undulationAt(p.lon_deg, p.lat_deg);
+      if (!undulation) {
+        throw Error(ErrorCode::Input,
+                    "the point at " + std::to_string(p.lon_deg) + " E " + std::to_string(p.lat_deg) +
+                        " N is outside the geoid grid " + geoid->name +
+                        "; pass a grid that covers the data with --geoid FILE, or "
+                        "--heights ellipsoidal when the DEM heights are ellipsoidal");
+      }
+      p.height_m += *undulation;
+    }
+  }
   placed.ecef.resize(n);
   geodeticToEcef(placed.geodetic, placed.ecef);
 
@@ -172,11 +188,18 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   const DemGrid dem = readDem(options.inputs);
   const DemStatistics stats = computeStatistics(dem);
   const CrsToWgs84 to_wgs84(dem.crs_wkt);
+  std::optional<GeoidGrid> geoid;
+  if (options.heights == HeightReference::Orthometric) {
+    geoid = readGeoidGrid(options.geoid_path.empty() ? kDefaultGeoidPath : options.geoid_path);
+  }
   progress.endStage();
+  progress.note(geoid ? "heights: orthometric, geoid " + geoid->name
+                      : std::string("heights: ellipsoidal (no geoid)"));
 
   BuildSummary summary;
   summary.output_dir = options.output_dir;
   summary.crs_name = dem.crs_name;
+  summary.geoid = geoid ? geoid->name : "none (heights are ellipsoidal)";
   summary.width = dem.width;
   summary.height = dem.height;
   summary.pixel_size = dem.pixel_size_x;
@@ -213,7 +236,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   progress.beginStage("writing tiles", total_tiles);
   std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
   for (const PyramidLevel& level : pyramid.levels) {
-    const PlacedLevel placed = placeLevel(dem, level.mesh, to_wgs84);
+    const PlacedLevel placed = placeLevel(dem, level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
     ZoomSummary zoom_summary;
     zoom_summary.zoom = level.zoom;
     zoom_summary.step_pixels = level.step;

@@ -11,12 +11,19 @@
 
 namespace terratiles {
 
+enum class HeightReference {
+  Orthometric,  // heights above a geoid (LN02, NAP, EGM96...): add the geoid undulation
+  Ellipsoidal,  // heights already above the WGS84 ellipsoid: use as they are
+};
+
 struct BuildOptions {
   std::vector<std::string> inputs;
   std::string output_dir;
   bool force = false;
   std::int32_t tile_cells = 128;       // grid cells per tile side
   std::int32_t max_zoom = -1;          // -1: enough zooms for one root tile
+  HeightReference heights = HeightReference::Orthometric;
+  std::string geoid_path;              // empty: EGM96 from Debian's proj-data
   bool draco = true;
   double position_step_m = 1.0 / 128;  // shared Draco quantisation grid
 };
@@ -44,6 +51,7 @@ struct BuildSummary {
   double max_height_m = 0;
   double centre_lon_deg = 0;
   double centre_lat_deg = 0;
+  std::string geoid;  // which geoid turned heights ellipsoidal, or "none (ellipsoidal input)"
   std::vector<ZoomSummary> zooms;
   std::size_t tiles = 0;
   std::size_t triangles = 0;

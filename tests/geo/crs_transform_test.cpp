@@ -85,3 +85,44 @@ TEST_SUITE("geo") {
     CHECK(out[2].z == doctest::Approx(6356752.314245));
   }
 }
+
+#include "formats/geoid/read_geoid.h"
+
+TEST_SUITE("geo") {
+  TEST_CASE("EGM96 and CHGeo2004 undulations match PROJ at the reference points") {
+    // Columns 11 (N_chgeo2004_LN02) and 16 (N_egm96) of the reference CSV.
+    std::ifstream in(test::sharedData("reference/lv95_reference_points.csv"));
+    const CrsToWgs84 to_wgs84("EPSG:2056");
+    const GeoidGrid egm96 = readGeoidGrid(kDefaultGeoidPath);
+    const GeoidGrid chgeo = readGeoidGrid(test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif"));
+    CHECK(egm96.wraps_longitude);
+    CHECK_FALSE(chgeo.wraps_longitude);
+    std::string line;
+    int points = 0;
+    double worst_egm96 = 0, worst_chgeo = 0;
+    while (std::getline(in, line)) {
+      if (line.empty() || line[0] == '#' || line.rfind("name,", 0) == 0) continue;
+      std::stringstream fields(line);
+      std::vector<std::string> f;
+      std::string field;
+      while (std::getline(fields, field, ',')) f.push_back(field);
+      const double lon = std::stod(f[4]), lat = std::stod(f[5]);
+      worst_egm96 = std::max(worst_egm96, std::fabs(egm96.undulationAt(lon, lat).value() - std::stod(f[16])));
+      worst_chgeo = std::max(worst_chgeo, std::fabs(chgeo.undulationAt(lon, lat).value() - std::stod(f[11])));
+      ++points;
+    }
+    CHECK(points == 16);
+    MESSAGE("worst undulation difference to PROJ: EGM96 " << worst_egm96 << " m, CHGeo2004 " << worst_chgeo << " m");
+    CHECK(worst_egm96 < 1e-3);
+    CHECK(worst_chgeo < 1e-3);
+    // CHGeo2004 covers Switzerland only.
+    CHECK_FALSE(chgeo.undulationAt(4.36, 52.0).has_value());
+    // EGM96 wraps at the antimeridian.
+    CHECK(egm96.undulationAt(179.99, 0.0).value() == doctest::Approx(egm96.undulationAt(-180.01, 0.0).value()));
+  }
+
+  TEST_CASE("a missing or unreadable geoid grid is an input error with the fix") {
+    CHECK_THROWS_WITH(readGeoidGrid("/nonexistent/geoid.gtx"), doctest::Contains("install proj-data"));
+    CHECK_THROWS_WITH(readGeoidGrid(test::sharedData("README.md")), doctest::Contains("not a geoid grid GDAL can read"));
+  }
+}

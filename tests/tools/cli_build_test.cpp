@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "formats/dem/read_dem.h"
+#include "formats/geoid/read_geoid.h"
 #include "formats/gltf/read_glb.h"
 #include "tests/test_support.h"
 
@@ -29,8 +30,16 @@ struct TreeStats {
 };
 
 // Checks one tile and its subtree; returns the decoded content's height range via stats.
+// The DEM's orthometric height range, and the geoid the build used (nullptr: heights were
+// written as ellipsoidal).
+struct HeightCheck {
+  double min_m = 0;
+  double max_m = 0;
+  const GeoidGrid* geoid = nullptr;
+};
+
 void checkTile(const json& tile, const fs::path& root_dir, double parent_error, int depth,
-               const json* parent_region, TreeStats& stats, double min_h, double max_h) {
+               const json* parent_region, TreeStats& stats, const HeightCheck& heights) {
   ++stats.tiles;
   stats.depth = std::max(stats.depth, depth);
   const double error = tile.at("geometricError").get<double>();
@@ -57,8 +66,8 @@ void checkTile(const json& tile, const fs::path& root_dir, double parent_error, 
     CHECK(decoded.draco);
     REQUIRE(decoded.mesh.triangle_indices.size() >= 3);
     // Every decoded vertex lies inside the tile's region (content overlaps are allowed by
-    // 3D Tiles, but our region is computed from this very content) and within the DEM's
-    // height range, to the quantisation step.
+    // 3D Tiles, but our region is computed from this very content) and, once the geoid
+    // undulation is taken off again, within the DEM's height range, to the quantisation step.
     const auto& earth = GeographicLib::Geocentric::WGS84();
     const double tolerance_m = 0.02, tolerance_rad = 1e-8;
     for (std::size_t v = 0; v < decoded.mesh.vertexCount(); ++v) {
@@ -71,13 +80,16 @@ void checkTile(const json& tile, const fs::path& root_dir, double parent_error, 
       REQUIRE(lon / kRadToDeg <= region[2].get<double>() + tolerance_rad);
       REQUIRE(lat / kRadToDeg >= region[1].get<double>() - tolerance_rad);
       REQUIRE(lat / kRadToDeg <= region[3].get<double>() + tolerance_rad);
-      REQUIRE(h >= min_h - tolerance_m);
-      REQUIRE(h <= max_h + tolerance_m);
+      REQUIRE(h >= region[4].get<double>() - tolerance_m);
+      REQUIRE(h <= region[5].get<double>() + tolerance_m);
+      if (heights.geoid) h -= heights.geoid->undulationAt(lon, lat).value();
+      REQUIRE(h >= heights.min_m - tolerance_m);
+      REQUIRE(h <= heights.max_m + tolerance_m);
     }
   }
   if (tile.contains("children")) {
     for (const json& child : tile["children"]) {
-      checkTile(child, root_dir, error, depth + 1, &region, stats, min_h, max_h);
+      checkTile(child, root_dir, error, depth + 1, &region, stats, heights);
     }
   }
 }
@@ -87,10 +99,12 @@ struct BuiltTileset {
   TreeStats stats;
 };
 
-BuiltTileset buildAndCheck(const std::vector<std::string>& inputs, const fs::path& out) {
+BuiltTileset buildAndCheck(const std::vector<std::string>& inputs, const fs::path& out,
+                          const std::vector<std::string>& options = {}) {
   std::vector<std::string> args{"build"};
   args.insert(args.end(), inputs.begin(), inputs.end());
   args.insert(args.end(), {"-o", out.string(), "--progress", "none"});
+  args.insert(args.end(), options.begin(), options.end());
   const auto result = test::runTerratiles(args);
   CAPTURE(result.err);
   REQUIRE(result.exit_code == 0);
@@ -103,8 +117,14 @@ BuiltTileset buildAndCheck(const std::vector<std::string>& inputs, const fs::pat
   CHECK(built.tileset["root"]["refine"] == "REPLACE");
   const DemGrid dem = readDem(inputs);
   const DemStatistics dem_stats = computeStatistics(dem);
+  const bool ellipsoidal = std::find(options.begin(), options.end(), "ellipsoidal") != options.end();
+  const auto geoid_option = std::find(options.begin(), options.end(), "--geoid");
+  const GeoidGrid geoid = readGeoidGrid(geoid_option != options.end() ? *(geoid_option + 1)
+                                                                      : std::string(kDefaultGeoidPath));
+  const HeightCheck heights{dem_stats.min_height_m, dem_stats.max_height_m,
+                            ellipsoidal ? nullptr : &geoid};
   checkTile(built.tileset["root"], out, built.tileset["geometricError"].get<double>(), 0, nullptr,
-            built.stats, dem_stats.min_height_m, dem_stats.max_height_m);
+            built.stats, heights);
   // Every GLB on disk is referenced, and no temporary file is left.
   std::size_t glb_files = 0;
   for (const auto& entry : fs::recursive_directory_iterator(out)) {
@@ -139,6 +159,20 @@ TEST_SUITE("integration") {
     checkRootCentre(built.tileset, 46.707, 7.872, 0.01);
     CHECK(built.stats.depth == 2);  // 349 cells, 128 per tile: zooms 0..2
     CHECK(built.stats.contents >= 1 + 2 + 6);
+  }
+
+  TEST_CASE("the geoid lifts Swiss LN02 heights by the undulation and CHGeo2004 can replace EGM96") {
+    test::TempDir dir;
+    const std::string input = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+    const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
+    const BuiltTileset plain = buildAndCheck({input}, dir.path() / "ellipsoidal", {"--heights", "ellipsoidal"});
+    const BuiltTileset egm96 = buildAndCheck({input}, dir.path() / "egm96");
+    const BuiltTileset swiss = buildAndCheck({input}, dir.path() / "chgeo", {"--geoid", chgeo});
+    auto lowest = [](const BuiltTileset& b) { return b.tileset["root"]["boundingVolume"]["region"][4].get<double>(); };
+    // Geoid undulation near Interlaken: CHGeo2004 about 49.5-50.5 m, EGM96 within 3 m of it.
+    CHECK(lowest(swiss) - lowest(plain) > 49.0);
+    CHECK(lowest(swiss) - lowest(plain) < 51.5);
+    CHECK(std::fabs(lowest(egm96) - lowest(swiss)) < 3.0);
   }
 
   TEST_CASE("the two Delft AHN3 tiles become one tileset as a mosaic") {

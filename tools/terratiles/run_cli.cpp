@@ -58,6 +58,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.pixel_size << " " << s.crs_name << ", heights " << std::setprecision(1)
        << s.min_height_m << " .. " << s.max_height_m << " m, centre " << std::setprecision(5)
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
+  text << "  geoid    " << s.geoid << "\n";
   text << "  zoom  step  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
   for (const ZoomSummary& z : s.zooms) {
     text << "  " << std::setw(4) << z.zoom << std::setw(6) << z.step_pixels << std::setw(7)
@@ -112,6 +113,18 @@ int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::
       ->add_option("--max-zoom", build.max_zoom,
                    "Finest zoom (-1: as many zooms as one root tile needs)")
       ->capture_default_str();
+  std::string heights_choice = "orthometric";
+  build_command
+      ->add_option("--heights", heights_choice,
+                   "What DEM heights are relative to: orthometric (above a geoid; converted to "
+                   "WGS84 ellipsoidal heights with --geoid) or ellipsoidal (used as they are)")
+      ->check(CLI::IsMember({"orthometric", "ellipsoidal"}))
+      ->capture_default_str();
+  build_command
+      ->add_option("--geoid", build.geoid_path,
+                   "Geoid grid for orthometric heights, any GDAL raster in lon/lat (e.g. "
+                   "CHGeo2004 for LN02 heights) [default: EGM96, /usr/share/proj/egm96_15.gtx]")
+      ->check(CLI::ExistingFile);
   build_command->add_flag("--no-draco", [&build](std::int64_t) { build.draco = false; },
                           "Write plain GLB without KHR_draco_mesh_compression");
   build_command
@@ -147,6 +160,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::
   }
 
   if (build_command->parsed()) {
+    if (heights_choice == "ellipsoidal") {
+      if (!build.geoid_path.empty()) {
+        throw Error(ErrorCode::Usage, "--geoid and --heights ellipsoidal exclude each other "
+                                      "(a geoid only applies to orthometric heights)");
+      }
+      build.heights = HeightReference::Ellipsoidal;
+    }
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
     const BuildSummary summary = runPipeline(build, progress);
