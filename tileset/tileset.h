@@ -36,7 +36,7 @@ struct TileNode {
 
 struct Tileset {
   TileNode root;
-  double geometric_error_m = 0;  // error of drawing nothing at all
+  double geometric_error_m = 0;  // error of drawing nothing at all (>= root's)
   std::string generator;         // asset.generator, e.g. "terratiles 0.1.0"
 };
 

@@ -66,6 +66,7 @@ struct DracoEncoded {
   int normal_id = -1;
   std::size_t points = 0;  // as the decoder will produce them (Edgebreaker may split vertices)
   std::size_t faces = 0;
+  double position_step_m = 0;
 };
 
 DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const Bounds& bounds) {
@@ -101,20 +102,22 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
 
   // Explicit quantisation on the shared grid: origin on a multiple of the step (the mesh
   // translation is on the grid too), range = step * (2^bits - 1) covering the extent.
-  const double step = options.position_step_m;
-  float origin[3];
+  // Draco's entropy coder builds histograms as large as 2^bits, so a tile wider than
+  // step * 2^max_position_bits (8 km at 1/128 m and 20 bits: coarse zooms of large datasets)
+  // doubles its step until it fits; that step is still a multiple of the shared one.
+  double step = options.position_step_m;
   double extent = 0;
+  for (int k = 0; k < 3; ++k) extent = std::max(extent, bounds.max[k] - bounds.min[k]);
+  const int max_bits = std::clamp(options.max_position_bits, 8, 30);
+  while (step * (std::ldexp(1.0, max_bits) - 1) < extent + step) step *= 2;
+  float origin[3];
+  extent = 0;
   for (int k = 0; k < 3; ++k) {
     origin[k] = static_cast<float>(std::floor(bounds.min[k] / step) * step);
     extent = std::max(extent, bounds.max[k] - origin[k]);
   }
   int bits = 1;
-  while (bits < 30 && step * (std::ldexp(1.0, bits) - 1) < extent) ++bits;
-  if (step * (std::ldexp(1.0, bits) - 1) < extent) {
-    throw Error(ErrorCode::Internal, "tile extent " + std::to_string(extent) +
-                                         " m needs more than 30 Draco quantisation bits at a " +
-                                         std::to_string(step) + " m step");
-  }
+  while (bits < max_bits && step * (std::ldexp(1.0, bits) - 1) < extent) ++bits;
   const float range = static_cast<float>(step * (std::ldexp(1.0, bits) - 1));
 
   draco::Encoder encoder;
@@ -137,6 +140,7 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
   if (normal_id >= 0) encoded.normal_id = static_cast<int>(draco_mesh.attribute(normal_id)->unique_id());
   encoded.points = encoder.num_encoded_points();
   encoded.faces = encoder.num_encoded_faces();
+  encoded.position_step_m = step;
   return encoded;
 }
 
@@ -144,7 +148,7 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
 
 double snapToStep(double value, double step) { return std::round(value / step) * step; }
 
-std::vector<std::uint8_t> encodeGlb(const GlbMesh& mesh, const GlbOptions& options) {
+EncodedGlb encodeGlb(const GlbMesh& mesh, const GlbOptions& options) {
   TERRATILES_ASSERT(mesh.positions.size() % 3 == 0 && mesh.triangle_indices.size() % 3 == 0);
   TERRATILES_ASSERT(mesh.normals.empty() || mesh.normals.size() == mesh.positions.size());
   const std::size_t vertex_count = mesh.vertexCount();
@@ -162,6 +166,7 @@ std::vector<std::uint8_t> encodeGlb(const GlbMesh& mesh, const GlbOptions& optio
   material.pbrMetallicRoughness.roughnessFactor = 1.0;
   model.materials.push_back(material);
 
+  EncodedGlb result;
   tinygltf::Primitive primitive;
   primitive.mode = TINYGLTF_MODE_TRIANGLES;
   primitive.material = 0;
@@ -171,6 +176,7 @@ std::vector<std::uint8_t> encodeGlb(const GlbMesh& mesh, const GlbOptions& optio
 
   if (options.draco) {
     const DracoEncoded draco = encodeDraco(mesh, options, bounds);
+    result.position_step_m = draco.position_step_m;
     const int view = appendBufferView(model, draco.bytes.data(), draco.bytes.size(), 0);
     primitive.attributes["POSITION"] =
         addAccessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, draco.points);
@@ -241,7 +247,8 @@ std::vector<std::uint8_t> encodeGlb(const GlbMesh& mesh, const GlbOptions& optio
     throw Error(ErrorCode::Internal, "tinygltf could not serialise a GLB tile");
   }
   const std::string bytes = stream.str();
-  return std::vector<std::uint8_t>(bytes.begin(), bytes.end());
+  result.bytes.assign(bytes.begin(), bytes.end());
+  return result;
 }
 
 }  // namespace terratiles

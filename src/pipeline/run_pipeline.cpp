@@ -152,7 +152,24 @@ EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const
                         {static_cast<float>(n.x), static_cast<float>(n.z), static_cast<float>(-n.y)});
   }
   out.vertices = level_vertex.size();
-  out.glb = encodeGlb(mesh, glb);
+  EncodedGlb encoded = encodeGlb(mesh, glb);
+  out.glb = std::move(encoded.bytes);
+  // The region must hold the decoded content: grow it by the quantisation step (decoded
+  // positions are within half a step per axis, sqrt(3)/2 step in all).
+  const double grow_m = encoded.position_step_m;
+  if (grow_m > 0) {
+    constexpr double kMinimumRadius_m = 6.3e6;  // below any WGS84 radius of curvature
+    const double grow_lat = grow_m / kMinimumRadius_m;
+    const double widest = std::max(std::fabs(out.region.south_rad), std::fabs(out.region.north_rad));
+    const double grow_lon = grow_lat / std::max(std::cos(std::min(widest, 1.5707)), 1e-6);
+    Region& r = out.region;
+    r.west_rad = std::max(r.west_rad - grow_lon, -std::numbers::pi);
+    r.east_rad = std::min(r.east_rad + grow_lon, std::numbers::pi);
+    r.south_rad = std::max(r.south_rad - grow_lat, -std::numbers::pi / 2);
+    r.north_rad = std::min(r.north_rad + grow_lat, std::numbers::pi / 2);
+    r.min_height_m -= grow_m;
+    r.max_height_m += grow_m;
+  }
   return out;
 }
 
@@ -279,10 +296,22 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   tileset.generator = glb.generator;
   tileset.root = buildTree(nodes, max_zoom);
   finalizeTree(tileset.root);
-  // The error of drawing nothing: the terrain's full relief above or below the ellipsoid.
-  tileset.geometric_error_m =
-      std::max({tileset.root.geometric_error_m, tileset.root.region.max_height_m - tileset.root.region.min_height_m,
-                std::fabs(tileset.root.region.max_height_m), std::fabs(tileset.root.region.min_height_m)});
+  // The error of drawing nothing at all: at least the data's size, the larger of the
+  // footprint's diagonal (chord between the root region's corners) and the relief. A value
+  // as small as the relief alone would hide flat terrain from any distance (CesiumJS does
+  // not draw a root whose error, seen through tileset.geometricError, is below the SSE).
+  {
+    const Region& r = tileset.root.region;
+    const std::vector<GeodeticPoint> corners{
+        {r.west_rad / kDegToRad, r.south_rad / kDegToRad, r.min_height_m},
+        {r.east_rad / kDegToRad, r.north_rad / kDegToRad, r.min_height_m}};
+    std::vector<EcefPoint> ends(2);
+    geodeticToEcef(corners, ends);
+    const double diagonal_m =
+        std::hypot(ends[1].x - ends[0].x, ends[1].y - ends[0].y, ends[1].z - ends[0].z);
+    tileset.geometric_error_m = std::max(
+        {tileset.root.geometric_error_m, diagonal_m, r.max_height_m - r.min_height_m});
+  }
   // Record per zoom the largest geometricError written (after finalizeTree raised them).
   std::vector<const TileNode*> stack{&tileset.root};
   while (!stack.empty()) {

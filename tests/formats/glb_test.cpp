@@ -34,7 +34,9 @@ TEST_SUITE("formats") {
   TEST_CASE("a Draco GLB decodes to the same triangles within half a quantisation step") {
     const GlbMesh mesh = patch(20, {4325000.0, 4638000.0, -564000.0});
     GlbOptions options;
-    const std::vector<std::uint8_t> bytes = encodeGlb(mesh, options);
+    const EncodedGlb encoded = encodeGlb(mesh, options);
+    CHECK(encoded.position_step_m == options.position_step_m);
+    const std::vector<std::uint8_t>& bytes = encoded.bytes;
     const DecodedGlb decoded = decodeGlb(bytes, "patch.glb");
     CHECK(decoded.draco);
     CHECK(decoded.json.find("\"extensionsRequired\":[\"KHR_draco_mesh_compression\"]") !=
@@ -85,8 +87,8 @@ TEST_SUITE("formats") {
       b.positions[k] = static_cast<float>(shared[k] - b_origin[k]);
     }
     GlbOptions options;
-    const DecodedGlb da = decodeGlb(encodeGlb(a, options), "a.glb");
-    const DecodedGlb db = decodeGlb(encodeGlb(b, options), "b.glb");
+    const DecodedGlb da = decodeGlb(encodeGlb(a, options).bytes, "a.glb");
+    const DecodedGlb db = decodeGlb(encodeGlb(b, options).bytes, "b.glb");
     auto nearest = [&](const DecodedGlb& d) {
       std::array<double, 3> best{};
       double best_distance = 1e300;
@@ -103,11 +105,33 @@ TEST_SUITE("formats") {
     CHECK(std::hypot(pa[0] - shared[0], pa[1] - shared[1], pa[2] - shared[2]) < step);
   }
 
+  TEST_CASE("a tile wider than the bit budget quantises on a coarser multiple of the step") {
+    GlbMesh wide = patch(4, {0, 0, 0});
+    wide.positions[0] = 50000.0f;  // 50 km: more than 2^20 steps of 1/128 m
+    GlbOptions options;
+    const EncodedGlb encoded = encodeGlb(wide, options);
+    CHECK(encoded.position_step_m == options.position_step_m * 8);  // 2^20 * 8 / 128 > 50 km
+    const DecodedGlb decoded = decodeGlb(encoded.bytes, "wide.glb");
+    double worst = 0;
+    for (std::size_t v = 0; v < decoded.mesh.vertexCount(); ++v) {
+      for (int k = 0; k < 3; ++k) {
+        worst = std::max(worst, static_cast<double>(std::fabs(decoded.mesh.positions[3 * v + k] -
+                                                              wide.positions[3 * v + k])));
+      }
+    }
+    // Draco reorders vertices; the extreme vertex still decodes within half the step used.
+    bool found = false;
+    for (std::size_t v = 0; v < decoded.mesh.vertexCount(); ++v) {
+      found |= std::fabs(decoded.mesh.positions[3 * v] - 50000.0f) <= encoded.position_step_m / 2;
+    }
+    CHECK(found);
+  }
+
   TEST_CASE("a plain GLB keeps positions and indices exactly") {
     const GlbMesh mesh = patch(5, {1.0, 2.0, 3.0});
     GlbOptions options;
     options.draco = false;
-    const DecodedGlb decoded = decodeGlb(encodeGlb(mesh, options), "plain.glb");
+    const DecodedGlb decoded = decodeGlb(encodeGlb(mesh, options).bytes, "plain.glb");
     CHECK_FALSE(decoded.draco);
     CHECK(decoded.mesh.positions == mesh.positions);
     CHECK(decoded.mesh.normals == mesh.normals);
@@ -115,7 +139,7 @@ TEST_SUITE("formats") {
   }
 
   TEST_CASE("a truncated GLB is an input error not a crash") {
-    const std::vector<std::uint8_t> bytes = encodeGlb(patch(4, {0, 0, 0}), GlbOptions{});
+    const std::vector<std::uint8_t> bytes = encodeGlb(patch(4, {0, 0, 0}), GlbOptions{}).bytes;
     for (std::size_t cut : {std::size_t{0}, std::size_t{11}, std::size_t{40}, bytes.size() - 7}) {
       const std::vector<std::uint8_t> truncated(bytes.begin(), bytes.begin() + static_cast<long>(cut));
       CHECK_THROWS_WITH(decodeGlb(truncated, "cut.glb"), doctest::Contains("cut.glb: malformed GLB"));
