@@ -9,7 +9,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
-tools/setup/install_dependencies.sh
+tools/setup/install_dependencies.sh --viewer
 tools/setup/build.sh
 
 sample_dir="$root/samples/data"

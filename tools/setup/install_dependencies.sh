@@ -2,7 +2,10 @@
 # Installs what terratiles needs on Debian 12, only what is missing: the compiler and CMake,
 # the Debian packages of every library (CGAL, METIS, tinygltf, Draco, GeographicLib, GDAL,
 # doctest, nlohmann-json, CLI11, TBB), PROJ's grids, Node.js, and the npm validators.
-# Usage: tools/setup/install_dependencies.sh [--browser]   (--browser adds Debian's chromium)
+# Usage: tools/setup/install_dependencies.sh [--viewer | --browser]
+#   --viewer  adds the npm packages of samples/viewer (cesium), to view a tileset;
+#   --browser adds what the browser test needs: the viewer, Debian's chromium, and the npm
+#             packages of tools/render_check (playwright-core, which drives chromium).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 
@@ -29,8 +32,15 @@ if ((${#missing[@]})); then
     "${missing[@]}" >/dev/null
 fi
 
-# The Khronos glTF validator (npm gltf-validator) that the tests run on every written GLB.
-if [[ ! -d tools/validators/node_modules/gltf-validator ]]; then
-  echo "terratiles setup: installing the npm validators" >&2
-  (cd tools/validators && npm ci --no-audit --no-fund --loglevel=error)
-fi
+# npm packages, each folder with its own package-lock.json: the Khronos glTF validator
+# (npm gltf-validator) that the tests run on every written GLB, and for the browser test the
+# CesiumJS viewer and the render check.
+npm_folders=(tools/validators)
+if [[ "${1:-}" == "--viewer" ]]; then npm_folders+=(samples/viewer); fi
+if [[ "${1:-}" == "--browser" ]]; then npm_folders+=(samples/viewer tools/render_check); fi
+for folder in "${npm_folders[@]}"; do
+  if [[ ! -d "$folder/node_modules" || "$folder/package-lock.json" -nt "$folder/node_modules" ]]; then
+    echo "terratiles setup: installing the npm packages of $folder" >&2
+    (cd "$folder" && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+done

@@ -1,0 +1,320 @@
+// terratiles viewer: loads a 3D Tiles tileset (default /data/tileset.json) into
+// CesiumJS without Cesium ion or any network access, flies to it and shows a
+// per-depth legend.  Automation reads `window.terratiles` (plain data) and may
+// call the helpers in `window.terratilesApi`.
+//
+// URL parameters:
+//   tileset=URL    tileset.json to load (default /data/tileset.json)
+//   sse=N          maximumScreenSpaceError (default 16)
+//   bv=1           show tile bounding volumes
+//   colorize=1     colour tiles randomly (debugColorizeTiles)
+//   wireframe=1    render tile meshes as wireframe
+//   time=ISO8601   scene time, i.e. sun position (default 2024-06-21T10:00:00Z)
+/* global Cesium */
+(function () {
+  'use strict';
+
+  const params = new URLSearchParams(window.location.search);
+  const tilesetUrl = params.get('tileset') || '/data/tileset.json';
+  const maximumScreenSpaceError = Number(params.get('sse') || 16);
+  const sceneTime = params.get('time') || '2024-06-21T10:00:00Z';
+
+  // ---- status object for automation (plain, JSON-serialisable data) --------
+  const status = {
+    tilesetUrl,
+    ready: false, // initial view reached and all its tiles loaded
+    error: null, // tileset could not be loaded
+    renderError: null, // CesiumJS stopped rendering (shader/WebGL error)
+    tilesLoaded: 0, // tileLoad events (content loads, re-loads included)
+    tilesUnloaded: 0,
+    failedTiles: [], // [{url, message}]
+    tilesByDepth: {}, // depth -> number of distinct tiles whose content loaded
+    renderedByDepth: {}, // depth -> number of distinct tiles rendered at least once
+    visibleByDepth: {}, // depth -> tiles rendered in the last frame
+    geometricErrorByDepth: {}, // depth -> geometric error of a tile seen at that depth
+    maxDepthSeen: -1,
+    allTilesLoaded: false, // tileset.tilesLoaded in the last frame
+    allTilesLoadedCount: 0, // allTilesLoaded events
+    initialTilesLoaded: false,
+    pendingRequests: 0,
+    tilesProcessing: 0,
+    frame: 0,
+    stableFrames: 0, // consecutive frames with camera still and all tiles loaded
+    center: null, // {lon, lat, height} deg/deg/m: root region centre (or bounding sphere)
+    region: null, // root region in degrees/metres, if the root uses a region
+    boundingSphere: null, // {lon, lat, height, radius} of the tileset bounding sphere
+    camera: null, // {lon, lat, height, headingDeg, pitchDeg}
+  };
+  window.terratiles = status;
+
+  const loadedSets = new Map(); // depth -> Set<Cesium3DTile>
+  const renderedSets = new Map();
+  let frameVisible = {};
+
+  function tileDepth(tile) {
+    let d = 0;
+    for (let t = tile.parent; t; t = t.parent) d++;
+    return d;
+  }
+  function addToSet(map, depth, tile) {
+    let s = map.get(depth);
+    if (!s) map.set(depth, (s = new Set()));
+    s.add(tile);
+    return s.size;
+  }
+  function noteDepth(tile, depth) {
+    if (depth > status.maxDepthSeen) status.maxDepthSeen = depth;
+    if (!(depth in status.geometricErrorByDepth)) {
+      status.geometricErrorByDepth[depth] = tile.geometricError;
+    }
+  }
+
+  // ---- viewer --------------------------------------------------------------
+  const viewer = new Cesium.Viewer('cesiumContainer', {
+    baseLayer: Cesium.ImageryLayer.fromProviderAsync(
+      Cesium.TileMapServiceImageryProvider.fromUrl(
+        Cesium.buildModuleUrl('Assets/Textures/NaturalEarthII'),
+      ),
+    ),
+    // no `terrain` option: WGS84 ellipsoid, nothing is fetched from ion
+    baseLayerPicker: false,
+    geocoder: false,
+    animation: false,
+    timeline: false,
+    homeButton: false,
+    sceneModePicker: false,
+    navigationHelpButton: false,
+    fullscreenButton: false,
+    infoBox: false,
+    selectionIndicator: false,
+    shouldAnimate: false,
+    requestRenderMode: false,
+    contextOptions: { webgl: { preserveDrawingBuffer: true } },
+  });
+  // fixed sun position so screenshots are reproducible
+  viewer.clock.currentTime = Cesium.JulianDate.fromIso8601(sceneTime);
+  viewer.clock.shouldAnimate = false;
+  const scene = viewer.scene;
+  scene.renderError.addEventListener((_scene, err) => {
+    status.renderError = (err && err.message) || String(err);
+  });
+
+  // ---- legend --------------------------------------------------------------
+  const legendBody = document.getElementById('legendBody');
+  let lastLegend = 0;
+  function fmt(n, digits) {
+    return Number.isFinite(n) ? n.toFixed(digits) : '-';
+  }
+  function updateLegend(force) {
+    const now = performance.now();
+    if (!force && now - lastLegend < 250) return;
+    lastLegend = now;
+    const depths = new Set([
+      ...Object.keys(status.tilesByDepth),
+      ...Object.keys(status.renderedByDepth),
+    ]);
+    const sorted = [...depths].map(Number).sort((a, b) => a - b);
+    let state;
+    if (status.error) state = `<span class="err">error: ${escapeHtml(status.error)}</span>`;
+    else if (!status.ready) state = 'loading&hellip;';
+    else state = status.allTilesLoaded ? '<span class="ok">all tiles loaded</span>' : 'loading tiles&hellip;';
+    let html = `${escapeHtml(tilesetUrl)}<br>${state}<br>`;
+    html += '<table><tr><th>depth</th><th>geom.err</th><th>loaded</th><th>visible</th><th>rendered</th></tr>';
+    for (const d of sorted) {
+      html +=
+        `<tr><td>${d}</td><td>${fmt(status.geometricErrorByDepth[d], 1)}</td>` +
+        `<td>${status.tilesByDepth[d] || 0}</td><td>${status.visibleByDepth[d] || 0}</td>` +
+        `<td>${status.renderedByDepth[d] || 0}</td></tr>`;
+    }
+    html += '</table>';
+    html += `tiles loaded: ${status.tilesLoaded}, pending: ${status.pendingRequests}, processing: ${status.tilesProcessing}<br>`;
+    const nf = status.failedTiles.length;
+    html += `failed tiles: <span class="${nf ? 'err' : 'ok'}">${nf}</span>`;
+    if (status.center) {
+      html += `<br>centre: ${fmt(status.center.lat, 4)}&deg;N ${fmt(status.center.lon, 4)}&deg;E`;
+    }
+    if (status.camera) html += `<br>camera height: ${fmt(status.camera.height, 0)} m`;
+    legendBody.innerHTML = html;
+  }
+  function escapeHtml(s) {
+    return String(s).replace(/[&<>"]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;' })[c]);
+  }
+
+  // ---- per-frame bookkeeping -----------------------------------------------
+  let tileset = null;
+  let zoomDone = false;
+  const lastCamPos = new Cesium.Cartesian3();
+  const lastCamDir = new Cesium.Cartesian3();
+
+  scene.preRender.addEventListener(() => {
+    frameVisible = {};
+  });
+  scene.postRender.addEventListener(() => {
+    status.frame++;
+    status.visibleByDepth = frameVisible;
+    const cam = viewer.camera;
+    const carto = cam.positionCartographic;
+    status.camera = {
+      lon: Cesium.Math.toDegrees(carto.longitude),
+      lat: Cesium.Math.toDegrees(carto.latitude),
+      height: carto.height,
+      headingDeg: Cesium.Math.toDegrees(cam.heading),
+      pitchDeg: Cesium.Math.toDegrees(cam.pitch),
+    };
+    const moved =
+      !Cesium.Cartesian3.equalsEpsilon(cam.positionWC, lastCamPos, 0, 1e-3) ||
+      !Cesium.Cartesian3.equalsEpsilon(cam.directionWC, lastCamDir, 1e-9);
+    Cesium.Cartesian3.clone(cam.positionWC, lastCamPos);
+    Cesium.Cartesian3.clone(cam.directionWC, lastCamDir);
+    if (tileset) {
+      status.allTilesLoaded = tileset.tilesLoaded;
+      status.stableFrames = !moved && tileset.tilesLoaded ? status.stableFrames + 1 : 0;
+      if (zoomDone && !status.ready && status.stableFrames >= 5) {
+        status.ready = true;
+        updateLegend(true);
+        console.log('terratiles: initial view loaded');
+      }
+    }
+    updateLegend(false);
+  });
+
+  // ---- tileset -------------------------------------------------------------
+  function regionCenter(json) {
+    const bv = json && json.root && json.root.boundingVolume;
+    if (!bv || !Array.isArray(bv.region) || bv.region.length !== 6) return null;
+    const [w, s, e, n, minH, maxH] = bv.region;
+    const deg = Cesium.Math.toDegrees;
+    status.region = { west: deg(w), south: deg(s), east: deg(e), north: deg(n), minHeight: minH, maxHeight: maxH };
+    let lonC = (w + e) / 2;
+    if (e < w) lonC = Cesium.Math.negativePiToPi(lonC + Math.PI); // crosses the antimeridian
+    return { lon: deg(lonC), lat: deg((s + n) / 2), height: (minH + maxH) / 2 };
+  }
+
+  async function load() {
+    try {
+      // The raw JSON gives the root region (the tileset's own notion of its extent).
+      const resp = await fetch(tilesetUrl, { cache: 'no-store' });
+      if (!resp.ok) throw new Error(`HTTP ${resp.status} for ${tilesetUrl}`);
+      const json = await resp.json();
+      const rc = regionCenter(json);
+
+      tileset = await Cesium.Cesium3DTileset.fromUrl(tilesetUrl, {
+        maximumScreenSpaceError,
+        debugShowBoundingVolume: params.get('bv') === '1',
+        debugColorizeTiles: params.get('colorize') === '1',
+        debugWireframe: params.get('wireframe') === '1',
+        enableDebugWireframe: params.get('wireframe') === '1',
+      });
+
+      tileset.tileLoad.addEventListener((tile) => {
+        const d = tileDepth(tile);
+        noteDepth(tile, d);
+        status.tilesLoaded++;
+        status.tilesByDepth[d] = addToSet(loadedSets, d, tile);
+      });
+      tileset.tileUnload.addEventListener(() => {
+        status.tilesUnloaded++;
+      });
+      tileset.tileFailed.addEventListener((err) => {
+        status.failedTiles.push({ url: String(err.url), message: String(err.message) });
+        console.error(`terratiles: tile failed: ${err.url}: ${err.message}`);
+        updateLegend(true);
+      });
+      tileset.tileVisible.addEventListener((tile) => {
+        const d = tileDepth(tile);
+        noteDepth(tile, d);
+        frameVisible[d] = (frameVisible[d] || 0) + 1;
+        status.renderedByDepth[d] = addToSet(renderedSets, d, tile);
+      });
+      tileset.loadProgress.addEventListener((pending, processing) => {
+        status.pendingRequests = pending;
+        status.tilesProcessing = processing;
+      });
+      tileset.allTilesLoaded.addEventListener(() => {
+        status.allTilesLoadedCount++;
+      });
+      tileset.initialTilesLoaded.addEventListener(() => {
+        status.initialTilesLoaded = true;
+      });
+
+      scene.primitives.add(tileset);
+      window.terratilesApi.tileset = tileset;
+
+      const bs = tileset.boundingSphere;
+      const bsc = Cesium.Cartographic.fromCartesian(bs.center);
+      status.boundingSphere = bsc
+        ? {
+            lon: Cesium.Math.toDegrees(bsc.longitude),
+            lat: Cesium.Math.toDegrees(bsc.latitude),
+            height: bsc.height,
+            radius: bs.radius,
+          }
+        : { lon: null, lat: null, height: null, radius: bs.radius };
+      status.center = rc || (bsc ? { lon: status.boundingSphere.lon, lat: status.boundingSphere.lat, height: bsc.height } : null);
+
+      // Overview: the whole tileset, tilted so the relief shows.
+      await viewer.zoomTo(
+        tileset,
+        new Cesium.HeadingPitchRange(0, Cesium.Math.toRadians(-40), 2.2 * bs.radius),
+      );
+      zoomDone = true;
+    } catch (e) {
+      status.error = (e && e.message) || String(e);
+      console.error(`terratiles: failed to load ${tilesetUrl}: ${status.error}`);
+    }
+    updateLegend(true);
+  }
+
+  // ---- helpers for automation ----------------------------------------------
+  window.terratilesApi = {
+    viewer,
+    tileset: null,
+    // Look at (lon, lat, height) from `range` metres away; camera stays free afterwards.
+    lookAt(lonDeg, latDeg, heightM, rangeM, pitchDeg = -89.5, headingDeg = 0) {
+      const target = Cesium.Cartesian3.fromDegrees(lonDeg, latDeg, heightM);
+      viewer.camera.lookAt(
+        target,
+        new Cesium.HeadingPitchRange(
+          Cesium.Math.toRadians(headingDeg),
+          Cesium.Math.toRadians(pitchDeg),
+          rangeM,
+        ),
+      );
+      viewer.camera.lookAtTransform(Cesium.Matrix4.IDENTITY);
+      status.stableFrames = 0;
+    },
+    zoomToTileset(pitchDeg = -40, rangeFactor = 2.2) {
+      status.stableFrames = 0;
+      if (!tileset) return Promise.resolve(false);
+      return viewer
+        .zoomTo(
+          tileset,
+          new Cesium.HeadingPitchRange(0, Cesium.Math.toRadians(pitchDeg), rangeFactor * tileset.boundingSphere.radius),
+        )
+        .then(() => true);
+    },
+    // Height (m above the ellipsoid) of the tileset surface at lon/lat, or null.
+    // The globe is hidden while sampling so only the tileset can be hit.
+    async sampleHeight(lonDeg, latDeg) {
+      if (!scene.sampleHeightSupported) throw new Error('scene.sampleHeight is not supported');
+      const globeShow = scene.globe.show;
+      scene.globe.show = false;
+      try {
+        const res = await scene.sampleHeightMostDetailed([Cesium.Cartographic.fromDegrees(lonDeg, latDeg)]);
+        const h = res && res[0] ? res[0].height : undefined;
+        return Number.isFinite(h) ? h : null;
+      } finally {
+        scene.globe.show = globeShow;
+      }
+    },
+    // Forget "rendered"/"loaded" tallies (e.g. before a new camera sweep).
+    resetCounters() {
+      loadedSets.clear();
+      renderedSets.clear();
+      status.tilesByDepth = {};
+      status.renderedByDepth = {};
+    },
+  };
+
+  load();
+})();
