@@ -79,12 +79,13 @@ void writeGeoTiff(const DemGrid& dem, const std::string& path, bool with_crs) {
   GDALClose(ds);
 }
 
-CliResult runTerratiles(const std::vector<std::string>& args) {
+CliResult runTerratiles(const std::vector<std::string>& args, const std::string& standard_input) {
   std::vector<std::string> argv{"terratiles"};
   argv.insert(argv.end(), args.begin(), args.end());
+  std::istringstream in(standard_input);
   std::ostringstream out, err;
   CliResult result;
-  result.exit_code = runCli(argv, out, err);
+  result.exit_code = runCli(argv, in, out, err);
   result.out = out.str();
   result.err = err.str();
   return result;

@@ -41,7 +41,7 @@ struct CliResult {
   std::string out;
   std::string err;
 };
-CliResult runTerratiles(const std::vector<std::string>& args);
+CliResult runTerratiles(const std::vector<std::string>& args, const std::string& standard_input = "");
 
 struct GltfValidation {
   int files = 0;

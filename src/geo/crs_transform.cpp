@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "src/base/error.h"
+#include "src/geo/swiss_lv95.h"
 
 namespace terratiles {
 
@@ -16,9 +17,11 @@ struct CrsToWgs84::Impl {
   OGRSpatialReference target;
   std::unique_ptr<OGRCoordinateTransformation> transform;
   std::string source_name;
+  bool rigorous_lv95 = false;
 };
 
-CrsToWgs84::CrsToWgs84(const std::string& crs_wkt) : impl_(std::make_unique<Impl>()) {
+CrsToWgs84::CrsToWgs84(const std::string& crs_wkt, TransformEngine engine)
+    : impl_(std::make_unique<Impl>()) {
   CPLPushErrorHandler(CPLQuietErrorHandler);
   CPLErrorReset();
   const OGRErr source_status = impl_->source.SetFromUserInput(crs_wkt.c_str());
@@ -34,6 +37,10 @@ CrsToWgs84::CrsToWgs84(const std::string& crs_wkt) : impl_(std::make_unique<Impl
   const char* code = impl_->source.GetAuthorityCode(nullptr);
   impl_->source_name = authority && code ? std::string(authority) + ":" + code
                                          : std::string(impl_->source.GetName() ? impl_->source.GetName() : "CRS");
+  if (engine == TransformEngine::Auto && impl_->source_name == "EPSG:2056") {
+    impl_->rigorous_lv95 = true;
+    return;
+  }
 
   OGRCoordinateTransformationOptions options;
   options.SetBallparkAllowed(false);
@@ -55,8 +62,19 @@ CrsToWgs84::CrsToWgs84(const std::string& crs_wkt) : impl_(std::make_unique<Impl
 
 CrsToWgs84::~CrsToWgs84() = default;
 
+const std::string& CrsToWgs84::sourceName() const { return impl_->source_name; }
+
+std::string CrsToWgs84::pathDescription() const {
+  return impl_->rigorous_lv95 ? impl_->source_name + " -> WGS84 by the rigorous swisstopo formulas"
+                              : impl_->source_name + " -> WGS84 by PROJ";
+}
+
 void CrsToWgs84::transform(std::span<const CrsPoint> in, std::span<GeodeticPoint> out) const {
   TERRATILES_ASSERT(in.size() == out.size());
+  if (impl_->rigorous_lv95) {
+    lv95ToWgs84(in, out);
+    return;
+  }
   constexpr std::size_t kBatch = 65536;
   std::vector<double> x(kBatch), y(kBatch), z(kBatch);
   std::vector<int> success(kBatch);

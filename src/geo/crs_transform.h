@@ -1,8 +1,9 @@
 #pragma once
 // CRS -> WGS84 geodetic -> ECEF.
 //
-// CrsToWgs84 wraps GDAL's OGRCoordinateTransformation (PROJ) from a horizontal CRS to
-// WGS84 longitude/latitude (EPSG:4326, traditional lon/lat order). It refuses a
+// CrsToWgs84 takes a horizontal CRS to WGS84 longitude/latitude (EPSG:4326, lon/lat order):
+// EPSG:2056 (CH1903+/LV95) through the rigorous swisstopo formulas (src/geo/swiss_lv95.h),
+// any other CRS through GDAL's OGRCoordinateTransformation (PROJ). It refuses a
 // "ballpark" transformation (one PROJ would use when it knows no real datum shift) with
 // Error(Input), because silently placing terrain hundreds of metres off is worse than failing.
 // Heights pass through unchanged (the caller decides what they are relative to).
@@ -29,10 +30,15 @@ struct EcefPoint {
   double z = 0;
 };
 
+enum class TransformEngine {
+  Auto,  // the rigorous swisstopo formulas for EPSG:2056, PROJ for every other CRS
+  Proj,  // PROJ through GDAL for every CRS (for comparisons and benchmarks)
+};
+
 class CrsToWgs84 {
  public:
   // crs_wkt: any horizontal CRS GDAL understands (WKT, "EPSG:2056", PROJ string).
-  explicit CrsToWgs84(const std::string& crs_wkt);
+  explicit CrsToWgs84(const std::string& crs_wkt, TransformEngine engine = TransformEngine::Auto);
   ~CrsToWgs84();
   CrsToWgs84(const CrsToWgs84&) = delete;
   CrsToWgs84& operator=(const CrsToWgs84&) = delete;
@@ -42,6 +48,10 @@ class CrsToWgs84 {
   // 1000 m of height), and it is left unchanged on output. Sizes must match.
   // Throws Error(Input) naming the first point PROJ cannot transform.
   void transform(std::span<const CrsPoint> in, std::span<GeodeticPoint> out) const;
+
+  // "EPSG:2056", or the CRS name; and which path transforms it, for logs and reports.
+  const std::string& sourceName() const;
+  std::string pathDescription() const;
 
  private:
   struct Impl;

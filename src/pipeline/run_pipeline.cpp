@@ -17,6 +17,7 @@
 #include "src/base/version.h"
 #include "src/geo/crs_transform.h"
 #include "src/geo/geoid.h"
+#include "src/geo/place_on_globe.h"
 #include "src/lod/grid_pyramid.h"
 #include "tileset/tileset.h"
 
@@ -54,28 +55,9 @@ PlacedLevel placeLevel(const DemGrid& dem, const TinMesh& mesh, const CrsToWgs84
                        const GeoidGrid* geoid) {
   PlacedLevel placed;
   const std::size_t n = mesh.vertices.size();
-  std::vector<CrsPoint> crs(n);
   placed.geodetic.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    crs[i] = dem.pixelCentre(mesh.vertices[i].col, mesh.vertices[i].row);
-    placed.geodetic[i].height_m = mesh.vertices[i].height_m;
-  }
-  to_wgs84.transform(crs, placed.geodetic);
-  if (geoid) {  // orthometric -> WGS84 ellipsoidal: h = H + N(lon, lat)
-    for (GeodeticPoint& p : placed.geodetic) {
-      const std::optional<double> undulation = geoid->undulationAt(p.lon_deg, p.lat_deg);
-      if (!undulation) {
-        throw Error(ErrorCode::Input,
-                    "the point at " + std::to_string(p.lon_deg) + " E " + std::to_string(p.lat_deg) +
-                        " N is outside the geoid grid " + geoid->name +
-                        "; pass a grid that covers the data with --geoid FILE, or "
-                        "--heights ellipsoidal when the DEM heights are ellipsoidal");
-      }
-      p.height_m += *undulation;
-    }
-  }
   placed.ecef.resize(n);
-  geodeticToEcef(placed.geodetic, placed.ecef);
+  placeOnGlobe(dem, mesh.vertices, to_wgs84, geoid, placed.geodetic, placed.ecef);
 
   placed.normals.assign(n, EcefPoint{});
   const auto& idx = mesh.triangle_indices;
@@ -210,6 +192,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     geoid = readGeoidGrid(options.geoid_path.empty() ? kDefaultGeoidPath : options.geoid_path);
   }
   progress.endStage();
+  progress.note("placement: " + to_wgs84.pathDescription());
   progress.note(geoid ? "heights: orthometric, geoid " + geoid->name
                       : std::string("heights: ellipsoidal (no geoid)"));
 
@@ -217,6 +200,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   summary.output_dir = options.output_dir;
   summary.crs_name = dem.crs_name;
   summary.geoid = geoid ? geoid->name : "none (heights are ellipsoidal)";
+  summary.placement = to_wgs84.pathDescription();
   summary.width = dem.width;
   summary.height = dem.height;
   summary.pixel_size = dem.pixel_size_x;

@@ -3,5 +3,5 @@
 #include "tools/terratiles/run_cli.h"
 
 int main(int argc, char** argv) {
-  return terratiles::runCli(std::vector<std::string>(argv, argv + argc), std::cout, std::cerr);
+  return terratiles::runCli(std::vector<std::string>(argv, argv + argc), std::cin, std::cout, std::cerr);
 }

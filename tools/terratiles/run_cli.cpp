@@ -6,14 +6,19 @@
 #include <algorithm>
 #include <csignal>
 #include <cstdio>
+#include <charconv>
 #include <iomanip>
+#include <istream>
+#include <optional>
 #include <ostream>
 #include <sstream>
 
 #include "src/base/error.h"
 #include "src/base/progress.h"
 #include "src/base/version.h"
+#include "src/geo/point_transform.h"
 #include "src/pipeline/run_pipeline.h"
+#include "formats/geoid/read_geoid.h"
 
 namespace terratiles {
 namespace {
@@ -58,7 +63,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.pixel_size << " " << s.crs_name << ", heights " << std::setprecision(1)
        << s.min_height_m << " .. " << s.max_height_m << " m, centre " << std::setprecision(5)
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
-  text << "  geoid    " << s.geoid << "\n";
+  text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
   text << "  zoom  step  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
   for (const ZoomSummary& z : s.zooms) {
     text << "  " << std::setw(4) << z.zoom << std::setw(6) << z.step_pixels << std::setw(7)
@@ -74,6 +79,76 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
   err << text.str() << std::flush;
 }
 
+// Parses "x y [z]" (separated by blanks or commas) without the locale; false otherwise.
+bool parsePointLine(const std::string& line, Point3& point) {
+  double values[3] = {0, 0, 0};
+  int count = 0;
+  const char* p = line.data();
+  const char* end = line.data() + line.size();
+  while (p < end) {
+    while (p < end && (*p == ' ' || *p == '\t' || *p == ',' || *p == '\r')) ++p;
+    if (p == end) break;
+    if (count == 3) return false;
+    const auto [next, ec] = std::from_chars(p, end, values[count]);
+    if (ec != std::errc() || next == p) return false;
+    p = next;
+    ++count;
+  }
+  if (count < 2) return false;
+  point = {values[0], values[1], values[2]};
+  return true;
+}
+
+// `terratiles transform`: "x y [z]" lines on `in` to transformed "x y z" lines on `out`.
+// Blank lines and lines starting with '#' pass through unchanged.
+void runTransform(const std::string& from, const std::string& to, const std::string& geoid_path,
+                  std::istream& in, std::ostream& out) {
+  std::optional<GeoidGrid> geoid;
+  if (!geoid_path.empty()) geoid = readGeoidGrid(geoid_path);
+  const PointTransform transform(from, to, geoid ? &*geoid : nullptr);
+  const int decimals = transform.targetIsGeographic() ? 12 : 6;
+  char buffer[128];
+  constexpr std::size_t kBatch = 65536;
+  std::vector<std::string> lines;
+  std::vector<Point3> points;
+  std::vector<std::size_t> point_line;
+  std::size_t line_number = 0;
+  bool more = true;
+  while (more) {
+    lines.clear();
+    points.clear();
+    point_line.clear();
+    std::string line;
+    while (points.size() < kBatch && (more = static_cast<bool>(std::getline(in, line)))) {
+      ++line_number;
+      const auto first = line.find_first_not_of(" \t\r");
+      if (first != std::string::npos && line[first] != '#') {
+        Point3 point;
+        if (!parsePointLine(line, point)) {
+          throw Error(ErrorCode::Input, "standard input line " + std::to_string(line_number) +
+                                            ": expected 'x y [z]' numbers, found '" +
+                                            line.substr(0, 60) + "'");
+        }
+        point_line.push_back(lines.size());
+        points.push_back(point);
+      }
+      lines.push_back(std::move(line));
+    }
+    transform.transform(points);
+    std::size_t next_point = 0;
+    for (std::size_t i = 0; i < lines.size(); ++i) {
+      if (next_point < point_line.size() && point_line[next_point] == i) {
+        const Point3& p = points[next_point++];
+        std::snprintf(buffer, sizeof buffer, "%.*f %.*f %.6f\n", decimals, p.x, decimals, p.y, p.z);
+        out << buffer;
+      } else {
+        out << lines[i] << "\n";
+      }
+    }
+  }
+  out << std::flush;
+}
+
 ProgressMode progressModeFor(const std::string& choice, bool quiet) {
   if (quiet || choice == "none") return ProgressMode::Quiet;
   if (choice == "json") return ProgressMode::Json;
@@ -81,7 +156,8 @@ ProgressMode progressModeFor(const std::string& choice, bool quiet) {
   return ::isatty(STDERR_FILENO) ? ProgressMode::Bar : ProgressMode::Quiet;
 }
 
-int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::ostream& out,
+                  std::ostream& err) {
   CLI::App app{"terratiles " + std::string(kVersion) +
                    ": DEM rasters to seamless multi-level-of-detail 3D Tiles terrain "
                    "(Draco glTF tiles and tileset.json for CesiumJS).",
@@ -139,6 +215,27 @@ int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::
       ->check(CLI::IsMember({"auto", "bar", "json", "none"}))
       ->capture_default_str();
 
+  std::string transform_from, transform_to, transform_geoid;
+  CLI::App* transform_command = app.add_subcommand(
+      "transform",
+      "Transform 'x y [z]' lines from standard input to standard output, like cs2cs, by the "
+      "paths terratiles uses (EPSG:2056 by the rigorous swisstopo formulas)");
+  transform_command->footer(kExitCodes);
+  transform_command
+      ->add_option("--from", transform_from,
+                   "Source CRS: EPSG code (EPSG:2056, EPSG:2056+5728, EPSG:4326...), WKT or PROJ "
+                   "string; x y in its units (lon lat in degrees), z in metres")
+      ->required();
+  transform_command
+      ->add_option("--to", transform_to,
+                   "Target CRS, e.g. EPSG:4326 or EPSG:4979 (lon lat h), EPSG:4978 (ECEF "
+                   "metres), EPSG:3857 (Web Mercator metres)")
+      ->required();
+  transform_command
+      ->add_option("--geoid", transform_geoid,
+                   "Geoid grid: heights on the non-WGS84 side are orthometric (h = H + N)")
+      ->check(CLI::ExistingFile);
+
   try {
     std::vector<const char*> argv;
     for (const auto& arg : args) argv.push_back(arg.c_str());
@@ -155,10 +252,15 @@ int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::
   } catch (const CLI::ParseError& e) {
     std::string message = e.what();
     std::replace(message.begin(), message.end(), '\n', ' ');
-    const std::string command = app.get_subcommands().empty() ? "" : " build";
+    const std::string command =
+        app.get_subcommands().empty() ? "" : " " + app.get_subcommands().front()->get_name();
     throw Error(ErrorCode::Usage, message + " (see 'terratiles" + command + " --help')");
   }
 
+  if (transform_command->parsed()) {
+    runTransform(transform_from, transform_to, transform_geoid, in, out);
+    return 0;
+  }
   if (build_command->parsed()) {
     if (heights_choice == "ellipsoidal") {
       if (!build.geoid_path.empty()) {
@@ -177,9 +279,10 @@ int runCliOrThrow(const std::vector<std::string>& args, std::ostream& out, std::
 
 }  // namespace
 
-int runCli(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+int runCli(const std::vector<std::string>& args, std::istream& in, std::ostream& out,
+           std::ostream& err) {
   try {
-    return runCliOrThrow(args, out, err);
+    return runCliOrThrow(args, in, out, err);
   } catch (const Error& e) {
     err << "terratiles: error: " << e.what() << "\n";
     return exitCodeFor(e.code());
