@@ -3,6 +3,7 @@
 #include <GeographicLib/Geocentric.hpp>
 #include <cpl_error.h>
 #include <ogr_spatialref.h>
+#include <proj.h>
 
 #include <algorithm>
 #include <vector>
@@ -12,12 +13,83 @@
 
 namespace terratiles {
 
+namespace {
+
+// What PROJ's list of CRS -> WGS84 operations says about grids, with grid availability
+// ignored (so operations needing a missing grid are listed too), in PROJ's order of
+// preference: the missing grids of non-ballpark operations, and whether the preferred one
+// is among those that cannot run (then PROJ silently falls back to a less accurate one).
+struct GridDiagnosis {
+  std::vector<std::string> missing_grids;
+  std::string preferred_name;   // the most accurate operation, when it lacks a grid
+  double preferred_accuracy_m = -1;
+};
+
+GridDiagnosis diagnoseGrids(const std::string& source_wkt) {
+  GridDiagnosis diagnosis;
+  PJ_CONTEXT* ctx = proj_context_create();
+  proj_log_level(ctx, PJ_LOG_NONE);
+  PJ* source = proj_create(ctx, source_wkt.c_str());
+  PJ* target = proj_create(ctx, "EPSG:4326");
+  PJ_OPERATION_FACTORY_CONTEXT* factory = proj_create_operation_factory_context(ctx, nullptr);
+  if (source && target && factory) {
+    proj_operation_factory_context_set_grid_availability_use(ctx, factory,
+                                                             PROJ_GRID_AVAILABILITY_IGNORED);
+    proj_operation_factory_context_set_spatial_criterion(
+        ctx, factory, PROJ_SPATIAL_CRITERION_PARTIAL_INTERSECTION);
+    PJ_OBJ_LIST* operations = proj_create_operations(ctx, source, target, factory);
+    const int count = operations ? proj_list_get_count(operations) : 0;
+    for (int i = 0; i < count; ++i) {
+      PJ* operation = proj_list_get(ctx, operations, i);
+      if (!operation) continue;
+      if (!proj_coordoperation_has_ballpark_transformation(ctx, operation)) {
+        bool lacks_grid = false;
+        const int grids = proj_coordoperation_get_grid_used_count(ctx, operation);
+        for (int g = 0; g < grids; ++g) {
+          const char* short_name = nullptr;
+          int available = 0;
+          if (proj_coordoperation_get_grid_used(ctx, operation, g, &short_name, nullptr, nullptr,
+                                                nullptr, nullptr, nullptr, &available) &&
+              !available && short_name) {
+            lacks_grid = true;
+            if (std::find(diagnosis.missing_grids.begin(), diagnosis.missing_grids.end(),
+                          short_name) == diagnosis.missing_grids.end()) {
+              diagnosis.missing_grids.emplace_back(short_name);
+            }
+          }
+        }
+        if (i == 0 && lacks_grid) {
+          const char* name = proj_get_name(operation);
+          diagnosis.preferred_name = name ? name : "";
+          diagnosis.preferred_accuracy_m = proj_coordoperation_get_accuracy(ctx, operation);
+        }
+      }
+      proj_destroy(operation);
+    }
+    proj_list_destroy(operations);
+  }
+  proj_operation_factory_context_destroy(factory);
+  proj_destroy(target);
+  proj_destroy(source);
+  proj_context_destroy(ctx);
+  return diagnosis;
+}
+
+std::string joined(const std::vector<std::string>& names) {
+  std::string text;
+  for (const auto& name : names) text += (text.empty() ? "" : ", ") + name;
+  return text;
+}
+
+}  // namespace
+
 struct CrsToWgs84::Impl {
   OGRSpatialReference source;
   OGRSpatialReference target;
   std::unique_ptr<OGRCoordinateTransformation> transform;
   std::string source_name;
   bool rigorous_lv95 = false;
+  std::vector<std::string> warnings;
 };
 
 CrsToWgs84::CrsToWgs84(const std::string& crs_wkt, TransformEngine engine)
@@ -51,6 +123,16 @@ CrsToWgs84::CrsToWgs84(const std::string& crs_wkt, TransformEngine engine)
   std::string gdal_message = CPLGetLastErrorMsg();
   CPLPopErrorHandler();
   if (!impl_->transform) {
+    const GridDiagnosis diagnosis = diagnoseGrids(crs_wkt);
+    if (!diagnosis.missing_grids.empty()) {
+      throw Error(ErrorCode::Input,
+                  "no accurate transformation from " + impl_->source_name +
+                      " to WGS84 is installed: PROJ needs the grid " +
+                      joined(diagnosis.missing_grids) +
+                      " (without it only a ballpark offset, metres off, is possible); install "
+                      "it into PROJ's data directory with 'projsync --file " +
+                      diagnosis.missing_grids.front() + "' or reproject the input with gdalwarp");
+    }
     throw Error(ErrorCode::Input,
                 "no accurate transformation from " + impl_->source_name +
                     " to WGS84 is known (PROJ offers only a ballpark one" +
@@ -58,9 +140,22 @@ CrsToWgs84::CrsToWgs84(const std::string& crs_wkt, TransformEngine engine)
                     "); install the datum grids (apt-get install proj-data) or reproject the "
                     "input with gdalwarp");
   }
+  const GridDiagnosis diagnosis = diagnoseGrids(crs_wkt);
+  if (!diagnosis.preferred_name.empty()) {
+    impl_->warnings.push_back(
+        "PROJ's most accurate path from " + impl_->source_name + " to WGS84 ('" +
+        diagnosis.preferred_name + "', " +
+        (diagnosis.preferred_accuracy_m >= 0 ? std::to_string(diagnosis.preferred_accuracy_m) + " m"
+                                             : std::string("unknown accuracy")) +
+        ") needs the grid " + joined(diagnosis.missing_grids) +
+        ", which is not installed, so a less accurate one is used; install it with 'projsync "
+        "--file " + diagnosis.missing_grids.front() + "'");
+  }
 }
 
 CrsToWgs84::~CrsToWgs84() = default;
+
+const std::vector<std::string>& CrsToWgs84::warnings() const { return impl_->warnings; }
 
 const std::string& CrsToWgs84::sourceName() const { return impl_->source_name; }
 

@@ -13,6 +13,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "src/dem/dem_grid.h"
 
@@ -48,6 +49,10 @@ class CrsToWgs84 {
   // 1000 m of height), and it is left unchanged on output. Sizes must match.
   // Throws Error(Input) naming the first point PROJ cannot transform.
   void transform(std::span<const CrsPoint> in, std::span<GeodeticPoint> out) const;
+
+  // Lines for the log and the report, e.g. that PROJ's most accurate operation lacks a grid
+  // and a less accurate one is used (EPSG:27700 without the OSTN15 grid: 2 m instead of cm).
+  const std::vector<std::string>& warnings() const;
 
   // "EPSG:2056", or the CRS name; and which path transforms it, for logs and reports.
   const std::string& sourceName() const;

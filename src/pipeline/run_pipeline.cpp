@@ -193,6 +193,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   }
   progress.endStage();
   progress.note("placement: " + to_wgs84.pathDescription());
+  for (const std::string& warning : to_wgs84.warnings()) progress.note("warning: " + warning);
   progress.note(geoid ? "heights: orthometric, geoid " + geoid->name
                       : std::string("heights: ellipsoidal (no geoid)"));
 
@@ -201,6 +202,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   summary.crs_name = dem.crs_name;
   summary.geoid = geoid ? geoid->name : "none (heights are ellipsoidal)";
   summary.placement = to_wgs84.pathDescription();
+  summary.warnings = to_wgs84.warnings();
   summary.width = dem.width;
   summary.height = dem.height;
   summary.pixel_size = dem.pixel_size_x;

@@ -52,6 +52,7 @@ struct BuildSummary {
   double centre_lon_deg = 0;
   double centre_lat_deg = 0;
   std::string placement;  // the CRS -> WGS84 path, e.g. "EPSG:2056 -> WGS84 by the rigorous ..."
+  std::vector<std::string> warnings;  // things the user should know (e.g. a missing grid)
   std::string geoid;  // which geoid turned heights ellipsoidal, or "none (ellipsoidal input)"
   std::vector<ZoomSummary> zooms;
   std::size_t tiles = 0;

@@ -76,6 +76,18 @@ TEST_SUITE("geo") {
     }
   }
 
+  TEST_CASE("a CRS whose most accurate path needs a missing grid is reported with that grid") {
+    // British National Grid: PROJ prefers the OSTN15 grid, which Debian's proj-data does not
+    // ship, and falls back to a 2 m Helmert; we say so.
+    const CrsToWgs84 british("EPSG:27700");
+    REQUIRE(british.warnings().size() == 1);
+    CHECK(british.warnings()[0].find("needs the grid uk_os_OSTN15_NTv2_OSGBtoETRS.tif") != std::string::npos);
+    CHECK(british.warnings()[0].find("projsync --file uk_os_OSTN15_NTv2_OSGBtoETRS.tif") != std::string::npos);
+    // Paths that have what they need say nothing.
+    CHECK(CrsToWgs84("EPSG:2056").warnings().empty());
+    CHECK(CrsToWgs84("EPSG:26915").warnings().empty());
+  }
+
   TEST_CASE("geodetic to ECEF puts the equator and the pole on the WGS84 axes") {
     std::vector<GeodeticPoint> in{{0, 0, 0}, {90, 0, 100}, {0, 90, 0}};
     std::vector<EcefPoint> out(3);

@@ -64,6 +64,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.min_height_m << " .. " << s.max_height_m << " m, centre " << std::setprecision(5)
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
+  for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
   text << "  zoom  step  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
   for (const ZoomSummary& z : s.zooms) {
     text << "  " << std::setw(4) << z.zoom << std::setw(6) << z.step_pixels << std::setw(7)
