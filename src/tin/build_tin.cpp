@@ -1,0 +1,405 @@
+#include "src/tin/build_tin.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "src/base/error.h"
+
+namespace terratiles {
+namespace {
+
+__extension__ typedef __int128 Int128;
+
+constexpr std::int32_t kNone = -1;
+
+inline std::int32_t nextHalfedge(std::int32_t e) { return e % 3 == 2 ? e - 2 : e + 1; }
+inline std::int32_t prevHalfedge(std::int32_t e) { return e % 3 == 0 ? e + 2 : e - 1; }
+
+struct Pixel {
+  std::int32_t x = 0;  // column
+  std::int32_t y = 0;  // row (grows south)
+};
+
+// orient(p, q, r) > 0: r is to the left of p->q in the (col, row) plane. Exact.
+inline std::int64_t orient(Pixel p, Pixel q, Pixel r) {
+  return std::int64_t{q.x - p.x} * (r.y - p.y) - std::int64_t{q.y - p.y} * (r.x - p.x);
+}
+
+// > 0 when d lies strictly inside the circumcircle of the positively oriented (a, b, c). Exact.
+inline bool inCircle(Pixel a, Pixel b, Pixel c, Pixel d) {
+  const std::int64_t adx = a.x - d.x, ady = a.y - d.y;
+  const std::int64_t bdx = b.x - d.x, bdy = b.y - d.y;
+  const std::int64_t cdx = c.x - d.x, cdy = c.y - d.y;
+  const std::int64_t ad = adx * adx + ady * ady;
+  const std::int64_t bd = bdx * bdx + bdy * bdy;
+  const std::int64_t cd = cdx * cdx + cdy * cdy;
+  const Int128 det = Int128{adx} * (Int128{bdy} * cd - Int128{bd} * cdy) -
+                     Int128{ady} * (Int128{bdx} * cd - Int128{bd} * cdx) +
+                     Int128{ad} * (Int128{bdx} * cdy - Int128{bdy} * cdx);
+  return det > 0;
+}
+
+// Floor and ceiling of n / d for d != 0.
+inline std::int64_t floorDiv(std::int64_t n, std::int64_t d) {
+  std::int64_t q = n / d;
+  if ((n % d != 0) && ((n < 0) != (d < 0))) --q;
+  return q;
+}
+inline std::int64_t ceilDiv(std::int64_t n, std::int64_t d) { return -floorDiv(-n, d); }
+
+// Greedy insertion state: a half-edge triangulation (Delaunator's layout: halfedge e of
+// triangle e / 3 runs from vertex triangles[e] to triangles[next(e)], halfedges[e] is its
+// twin or kNone on the hull), each triangle's candidate pixel and error, and a max-heap of
+// the triangles whose error exceeds the bound.
+class GreedyInsertion {
+ public:
+  GreedyInsertion(const DemGrid& dem, double max_error_m)
+      : dem_(dem), width_(dem.width), max_error_(max_error_m) {}
+
+  void run(Progress& progress) {
+    const Pixel corners[4] = {{0, 0}, {width_ - 1, 0}, {0, dem_.height - 1}, {width_ - 1, dem_.height - 1}};
+    for (const Pixel& corner : corners) addVertex(corner);
+    // Two triangles over the grid, positively oriented in (col, row): (0, 3, 2) and (0, 1, 3),
+    // sharing the diagonal 0-3.
+    const std::int32_t t0 = addTriangle(0, 3, 2, kNone, kNone, kNone);
+    const std::int32_t t1 = addTriangle(0, 1, 3, kNone, kNone, kNone);
+    link(3 * t0 + 0, 3 * t1 + 2);  // edge 0->3 of t0 and 3->0 of t1
+    flushPending();
+
+    const double total = static_cast<double>(dem_.pixelCount());
+    std::uint64_t reported = 0;
+    while (!heap_.empty()) {
+      const std::int32_t t = heap_.front();
+      insert(candidate_[static_cast<std::size_t>(t)], t);
+      flushPending();
+      // Progress by vertices relative to a rough budget; the stage total is the pixel count.
+      const auto done = static_cast<std::uint64_t>(std::min(total, static_cast<double>(coords_.size()) * 8));
+      if (done - reported >= 4096) {
+        progress.advance(done - reported);
+        reported = done;
+      }
+    }
+  }
+
+  TinMesh mesh() const {
+    TinMesh out;
+    out.vertices.reserve(coords_.size());
+    for (const Pixel& p : coords_) {
+      out.vertices.push_back({static_cast<double>(p.x), static_cast<double>(p.y),
+                              static_cast<double>(dem_.heightAt(p.x, p.y))});
+    }
+    // Positive in (col, row) is clockwise seen from above (row grows south): swap two
+    // corners for TinMesh's counter-clockwise convention.
+    out.triangle_indices.reserve(triangles_.size());
+    for (std::size_t e = 0; e < triangles_.size(); e += 3) {
+      out.triangle_indices.insert(out.triangle_indices.end(),
+                                  {static_cast<std::uint32_t>(triangles_[e]),
+                                   static_cast<std::uint32_t>(triangles_[e + 2]),
+                                   static_cast<std::uint32_t>(triangles_[e + 1])});
+    }
+    return out;
+  }
+
+ private:
+  std::int32_t addVertex(Pixel p) {
+    coords_.push_back(p);
+    return static_cast<std::int32_t>(coords_.size()) - 1;
+  }
+
+  std::int32_t addTriangle(std::int32_t a, std::int32_t b, std::int32_t c, std::int32_t ab,
+                           std::int32_t bc, std::int32_t ca) {
+    const auto t = static_cast<std::int32_t>(triangles_.size() / 3);
+    triangles_.insert(triangles_.end(), {a, b, c});
+    halfedges_.insert(halfedges_.end(), {kNone, kNone, kNone});
+    candidate_.push_back({});
+    error_.push_back(0);
+    heap_position_.push_back(kNone);
+    pending_flag_.push_back(0);
+    link(3 * t, ab);
+    link(3 * t + 1, bc);
+    link(3 * t + 2, ca);
+    markPending(t);
+    return t;
+  }
+
+  // Rewrites triangle t in place (keeps its slot) and schedules it for a rescan.
+  void setTriangle(std::int32_t t, std::int32_t a, std::int32_t b, std::int32_t c,
+                   std::int32_t ab, std::int32_t bc, std::int32_t ca) {
+    triangles_[static_cast<std::size_t>(3 * t)] = a;
+    triangles_[static_cast<std::size_t>(3 * t + 1)] = b;
+    triangles_[static_cast<std::size_t>(3 * t + 2)] = c;
+    link(3 * t, ab);
+    link(3 * t + 1, bc);
+    link(3 * t + 2, ca);
+    markPending(t);
+  }
+
+  void link(std::int32_t a, std::int32_t b) {
+    halfedges_[static_cast<std::size_t>(a)] = b;
+    if (b != kNone) halfedges_[static_cast<std::size_t>(b)] = a;
+  }
+
+  void markPending(std::int32_t t) {
+    heapRemove(t);
+    if (!pending_flag_[static_cast<std::size_t>(t)]) {
+      pending_flag_[static_cast<std::size_t>(t)] = 1;
+      pending_.push_back(t);
+    }
+  }
+
+  Pixel vertex(std::int32_t e) const { return coords_[static_cast<std::size_t>(triangles_[static_cast<std::size_t>(e)])]; }
+
+  // Inserts pixel p, the candidate of triangle t, splitting t (or the edge p lies on).
+  void insert(Pixel p, std::int32_t t) {
+    const std::int32_t e0 = 3 * t, e1 = e0 + 1, e2 = e0 + 2;
+    const std::int32_t a = triangles_[static_cast<std::size_t>(e0)];
+    const std::int32_t b = triangles_[static_cast<std::size_t>(e1)];
+    const std::int32_t c = triangles_[static_cast<std::size_t>(e2)];
+    const Pixel pa = coords_[static_cast<std::size_t>(a)], pb = coords_[static_cast<std::size_t>(b)],
+                pc = coords_[static_cast<std::size_t>(c)];
+    // Which edge p lies on, if any (p is inside or on the closed triangle).
+    std::int32_t on_edge = kNone;
+    if (orient(pa, pb, p) == 0) on_edge = e0;
+    else if (orient(pb, pc, p) == 0) on_edge = e1;
+    else if (orient(pc, pa, p) == 0) on_edge = e2;
+    const std::int32_t pv = addVertex(p);
+    if (on_edge == kNone) {
+      const std::int32_t h_ab = halfedges_[static_cast<std::size_t>(e0)];
+      const std::int32_t h_bc = halfedges_[static_cast<std::size_t>(e1)];
+      const std::int32_t h_ca = halfedges_[static_cast<std::size_t>(e2)];
+      // t becomes (a, b, p); new (b, c, p) and (c, a, p).
+      setTriangle(t, a, b, pv, h_ab, kNone, kNone);
+      const std::int32_t t1 = addTriangle(b, c, pv, h_bc, kNone, 3 * t + 1);
+      const std::int32_t t2 = addTriangle(c, a, pv, h_ca, 3 * t + 2, 3 * t1 + 1);
+      legalize(3 * t);
+      legalize(3 * t1);
+      legalize(3 * t2);
+      return;
+    }
+    splitEdge(on_edge, pv);
+  }
+
+  // p (vertex pv) lies on halfedge e of triangle (e / 3): split it and its twin's triangle.
+  void splitEdge(std::int32_t e, std::int32_t pv) {
+    const std::int32_t t = e / 3;
+    const std::int32_t en = nextHalfedge(e), ep = prevHalfedge(e);
+    const std::int32_t a = triangles_[static_cast<std::size_t>(e)];   // edge a -> b
+    const std::int32_t b = triangles_[static_cast<std::size_t>(en)];
+    const std::int32_t c = triangles_[static_cast<std::size_t>(ep)];  // opposite vertex
+    const std::int32_t h_bc = halfedges_[static_cast<std::size_t>(en)];
+    const std::int32_t h_ca = halfedges_[static_cast<std::size_t>(ep)];
+    const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+    if (twin == kNone) {
+      // Hull edge: t becomes (a, p, c) and new (p, b, c).
+      setTriangle(t, a, pv, c, kNone, kNone, h_ca);
+      const std::int32_t t1 = addTriangle(pv, b, c, kNone, h_bc, 3 * t + 1);
+      legalize(3 * t + 2);
+      legalize(3 * t1 + 1);
+      return;
+    }
+    const std::int32_t u = twin / 3;  // twin runs b -> a; its opposite vertex is d
+    const std::int32_t tn = nextHalfedge(twin), tp = prevHalfedge(twin);
+    const std::int32_t d = triangles_[static_cast<std::size_t>(tp)];
+    const std::int32_t h_ad = halfedges_[static_cast<std::size_t>(tn)];
+    const std::int32_t h_db = halfedges_[static_cast<std::size_t>(tp)];
+    // t -> (a, p, c), u -> (b, p, d), new (p, b, c) and (p, a, d).
+    setTriangle(t, a, pv, c, kNone, kNone, h_ca);
+    setTriangle(u, b, pv, d, kNone, kNone, h_db);
+    const std::int32_t t1 = addTriangle(pv, b, c, 3 * u, h_bc, 3 * t + 1);
+    const std::int32_t t2 = addTriangle(pv, a, d, 3 * t, h_ad, 3 * u + 1);
+    legalize(3 * t + 2);
+    legalize(3 * u + 2);
+    legalize(3 * t1 + 1);
+    legalize(3 * t2 + 1);
+  }
+
+  // Restores the Delaunay property across halfedge a, whose triangle's opposite vertex is
+  // the newly inserted point; recurses on the two edges that become opposite it.
+  void legalize(std::int32_t a) {
+    const std::int32_t b = halfedges_[static_cast<std::size_t>(a)];
+    if (b == kNone) return;
+    const std::int32_t an = nextHalfedge(a), ap = prevHalfedge(a);
+    const std::int32_t bn = nextHalfedge(b), bp = prevHalfedge(b);
+    const std::int32_t P = triangles_[static_cast<std::size_t>(a)];
+    const std::int32_t Q = triangles_[static_cast<std::size_t>(an)];
+    const std::int32_t L = triangles_[static_cast<std::size_t>(ap)];
+    const std::int32_t R = triangles_[static_cast<std::size_t>(bp)];
+    if (!inCircle(coords_[static_cast<std::size_t>(P)], coords_[static_cast<std::size_t>(Q)],
+                  coords_[static_cast<std::size_t>(L)], coords_[static_cast<std::size_t>(R)])) {
+      return;
+    }
+    const std::int32_t h_pr = halfedges_[static_cast<std::size_t>(bn)];
+    const std::int32_t h_ql = halfedges_[static_cast<std::size_t>(an)];
+    // (P, Q, L) and (Q, P, R) become (P, R, L) and (Q, L, R).
+    triangles_[static_cast<std::size_t>(an)] = R;
+    triangles_[static_cast<std::size_t>(bn)] = L;
+    link(a, h_pr);
+    link(b, h_ql);
+    link(an, bn);
+    markPending(a / 3);
+    markPending(b / 3);
+    legalize(a);
+    legalize(bp);
+  }
+
+  // Finds the worst pixel of every changed triangle and queues those above the bound.
+  void flushPending() {
+    for (const std::int32_t t : pending_) {
+      pending_flag_[static_cast<std::size_t>(t)] = 0;
+      scanTriangle(t);
+      if (error_[static_cast<std::size_t>(t)] > max_error_) heapPush(t);
+    }
+    pending_.clear();
+  }
+
+  // Rasterises triangle t row by row (exact integer spans) and keeps its worst pixel.
+  void scanTriangle(std::int32_t t) {
+    const Pixel a = vertex(3 * t), b = vertex(3 * t + 1), c = vertex(3 * t + 2);
+    const double za = dem_.heightAt(a.x, a.y), zb = dem_.heightAt(b.x, b.y), zc = dem_.heightAt(c.x, c.y);
+    const std::int64_t area2 = orient(a, b, c);
+    TERRATILES_ASSERT(area2 > 0);
+    // Plane z = gx * x + gy * y + z0 through the three vertices.
+    const double ux = b.x - a.x, uy = b.y - a.y, vx = c.x - a.x, vy = c.y - a.y;
+    const double dz1 = zb - za, dz2 = zc - za;
+    const double gx = (dz1 * vy - dz2 * uy) / static_cast<double>(area2);
+    const double gy = (dz2 * ux - dz1 * vx) / static_cast<double>(area2);
+    const double z0 = za - gx * a.x - gy * a.y;
+
+    // Edge functions w(x) = alpha * x + beta(y) >= 0 inside, for edges a->b, b->c, c->a.
+    const Pixel from[3] = {a, b, c}, to[3] = {b, c, a};
+    const std::int32_t min_y = std::min({a.y, b.y, c.y}), max_y = std::max({a.y, b.y, c.y});
+    const std::int32_t min_x = std::min({a.x, b.x, c.x}), max_x = std::max({a.x, b.x, c.x});
+    double best_error = -1;
+    Pixel best{a.x, a.y};
+    const float* heights = dem_.heights_m.data();
+    for (std::int32_t y = min_y; y <= max_y; ++y) {
+      std::int64_t x0 = min_x, x1 = max_x;
+      bool empty = false;
+      for (int k = 0; k < 3; ++k) {
+        const std::int64_t alpha = -std::int64_t{to[k].y - from[k].y};
+        const std::int64_t beta = std::int64_t{to[k].x - from[k].x} * (y - from[k].y) +
+                                  std::int64_t{to[k].y - from[k].y} * from[k].x;
+        if (alpha > 0) x0 = std::max(x0, ceilDiv(-beta, alpha));
+        else if (alpha < 0) x1 = std::min(x1, floorDiv(-beta, alpha));
+        else if (beta < 0) empty = true;
+      }
+      if (empty || x0 > x1) continue;
+      const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
+      const double row_z = gy * y + z0;
+      // First the row's largest error (vectorisable), then its position only if it wins.
+      double row_max = 0;
+      for (std::int64_t x = x0; x <= x1; ++x) {
+        row_max = std::max(row_max, std::fabs(gx * static_cast<double>(x) + row_z - row[x]));
+      }
+      if (row_max > best_error) {
+        for (std::int64_t x = x0; x <= x1; ++x) {
+          if (std::fabs(gx * static_cast<double>(x) + row_z - row[x]) == row_max) {
+            best = {static_cast<std::int32_t>(x), y};
+            best_error = row_max;
+            break;
+          }
+        }
+      }
+    }
+    // Never pick a vertex: its error is rounding noise, and inserting it twice would break
+    // the triangulation.
+    if ((best.x == a.x && best.y == a.y) || (best.x == b.x && best.y == b.y) ||
+        (best.x == c.x && best.y == c.y)) {
+      best_error = 0;
+    }
+    candidate_[static_cast<std::size_t>(t)] = best;
+    error_[static_cast<std::size_t>(t)] = best_error;
+  }
+
+  // ---- max-heap of triangles by error, with positions for removal ----
+  bool higher(std::int32_t i, std::int32_t j) const {
+    const double ei = error_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(i)])];
+    const double ej = error_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(j)])];
+    // Ties broken by triangle index so the result does not depend on heap history details.
+    return ei > ej || (ei == ej && heap_[static_cast<std::size_t>(i)] < heap_[static_cast<std::size_t>(j)]);
+  }
+  void swapHeap(std::int32_t i, std::int32_t j) {
+    std::swap(heap_[static_cast<std::size_t>(i)], heap_[static_cast<std::size_t>(j)]);
+    heap_position_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(i)])] = i;
+    heap_position_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(j)])] = j;
+  }
+  void siftUp(std::int32_t i) {
+    while (i > 0) {
+      const std::int32_t parent = (i - 1) / 2;
+      if (!higher(i, parent)) break;
+      swapHeap(i, parent);
+      i = parent;
+    }
+  }
+  void siftDown(std::int32_t i) {
+    const auto n = static_cast<std::int32_t>(heap_.size());
+    while (true) {
+      const std::int32_t l = 2 * i + 1, r = l + 1;
+      std::int32_t top = i;
+      if (l < n && higher(l, top)) top = l;
+      if (r < n && higher(r, top)) top = r;
+      if (top == i) break;
+      swapHeap(i, top);
+      i = top;
+    }
+  }
+  void heapPush(std::int32_t t) {
+    heap_.push_back(t);
+    heap_position_[static_cast<std::size_t>(t)] = static_cast<std::int32_t>(heap_.size()) - 1;
+    siftUp(static_cast<std::int32_t>(heap_.size()) - 1);
+  }
+  void heapRemove(std::int32_t t) {
+    const std::int32_t i = heap_position_[static_cast<std::size_t>(t)];
+    if (i == kNone) return;
+    const auto last = static_cast<std::int32_t>(heap_.size()) - 1;
+    if (i != last) swapHeap(i, last);
+    heap_.pop_back();
+    heap_position_[static_cast<std::size_t>(t)] = kNone;
+    if (i != last) {
+      siftUp(i);
+      siftDown(i);
+    }
+  }
+
+  const DemGrid& dem_;
+  const std::int32_t width_;
+  const double max_error_;
+  std::vector<Pixel> coords_;
+  std::vector<std::int32_t> triangles_;
+  std::vector<std::int32_t> halfedges_;
+  std::vector<Pixel> candidate_;
+  std::vector<double> error_;
+  std::vector<std::int32_t> heap_position_;
+  std::vector<std::uint8_t> pending_flag_;
+  std::vector<std::int32_t> heap_;
+  std::vector<std::int32_t> pending_;
+};
+
+}  // namespace
+
+TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progress) {
+  if (!(options.max_error_m > 0) || !std::isfinite(options.max_error_m)) {
+    throw Error(ErrorCode::Usage, "--tin-max-error is " + std::to_string(options.max_error_m) +
+                                      "; expected a positive number of metres");
+  }
+  if (dem.width < 2 || dem.height < 2) {
+    throw Error(ErrorCode::Input, "the DEM is " + std::to_string(dem.width) + " x " +
+                                      std::to_string(dem.height) + " pixels; expected at least 2 x 2");
+  }
+  for (float h : dem.heights_m) {
+    if (std::isnan(h)) {
+      throw Error(ErrorCode::Input, "the DEM has nodata pixels, which the greedy-insertion TIN "
+                                    "does not handle yet; fill them (gdal_fillnodata.py) first");
+    }
+  }
+  progress.beginStage("TIN (greedy insertion)", dem.pixelCount());
+  GreedyInsertion insertion(dem, options.max_error_m);
+  insertion.run(progress);
+  progress.endStage();
+  return insertion.mesh();
+}
+
+}  // namespace terratiles
