@@ -72,7 +72,7 @@ class GreedyInsertion {
     const double total = static_cast<double>(dem_.pixelCount());
     std::uint64_t reported = 0;
     while (!heap_.empty()) {
-      const std::int32_t t = heap_.front();
+      const std::int32_t t = heap_.front().triangle;
       insert(candidate_[static_cast<std::size_t>(t)], t);
       flushPending();
       // Progress by vertices relative to a rough budget; the stage total is the pixel count.
@@ -315,53 +315,57 @@ class GreedyInsertion {
   }
 
   // ---- max-heap of triangles by error, with positions for removal ----
-  bool higher(std::int32_t i, std::int32_t j) const {
-    const double ei = error_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(i)])];
-    const double ej = error_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(j)])];
-    // Ties broken by triangle index so the result does not depend on heap history details.
-    return ei > ej || (ei == ej && heap_[static_cast<std::size_t>(i)] < heap_[static_cast<std::size_t>(j)]);
+  // Entries carry their error so comparisons stay inside the heap's own memory.
+  struct HeapEntry {
+    double error;
+    std::int32_t triangle;
+  };
+  static bool higher(const HeapEntry& l, const HeapEntry& r) {
+    // Ties broken by triangle index: the result never depends on the heap's history.
+    return l.error > r.error || (l.error == r.error && l.triangle < r.triangle);
   }
-  void swapHeap(std::int32_t i, std::int32_t j) {
-    std::swap(heap_[static_cast<std::size_t>(i)], heap_[static_cast<std::size_t>(j)]);
-    heap_position_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(i)])] = i;
-    heap_position_[static_cast<std::size_t>(heap_[static_cast<std::size_t>(j)])] = j;
+  void place(std::int32_t i, const HeapEntry& entry) {
+    heap_[static_cast<std::size_t>(i)] = entry;
+    heap_position_[static_cast<std::size_t>(entry.triangle)] = i;
   }
   void siftUp(std::int32_t i) {
+    const HeapEntry entry = heap_[static_cast<std::size_t>(i)];
     while (i > 0) {
       const std::int32_t parent = (i - 1) / 2;
-      if (!higher(i, parent)) break;
-      swapHeap(i, parent);
+      if (!higher(entry, heap_[static_cast<std::size_t>(parent)])) break;
+      place(i, heap_[static_cast<std::size_t>(parent)]);
       i = parent;
     }
+    place(i, entry);
   }
   void siftDown(std::int32_t i) {
     const auto n = static_cast<std::int32_t>(heap_.size());
+    const HeapEntry entry = heap_[static_cast<std::size_t>(i)];
     while (true) {
-      const std::int32_t l = 2 * i + 1, r = l + 1;
-      std::int32_t top = i;
-      if (l < n && higher(l, top)) top = l;
-      if (r < n && higher(r, top)) top = r;
-      if (top == i) break;
-      swapHeap(i, top);
-      i = top;
+      std::int32_t child = 2 * i + 1;
+      if (child >= n) break;
+      if (child + 1 < n && higher(heap_[static_cast<std::size_t>(child + 1)], heap_[static_cast<std::size_t>(child)])) ++child;
+      if (!higher(heap_[static_cast<std::size_t>(child)], entry)) break;
+      place(i, heap_[static_cast<std::size_t>(child)]);
+      i = child;
     }
+    place(i, entry);
   }
   void heapPush(std::int32_t t) {
-    heap_.push_back(t);
+    heap_.push_back({error_[static_cast<std::size_t>(t)], t});
     heap_position_[static_cast<std::size_t>(t)] = static_cast<std::int32_t>(heap_.size()) - 1;
     siftUp(static_cast<std::int32_t>(heap_.size()) - 1);
   }
   void heapRemove(std::int32_t t) {
     const std::int32_t i = heap_position_[static_cast<std::size_t>(t)];
     if (i == kNone) return;
-    const auto last = static_cast<std::int32_t>(heap_.size()) - 1;
-    if (i != last) swapHeap(i, last);
-    heap_.pop_back();
     heap_position_[static_cast<std::size_t>(t)] = kNone;
-    if (i != last) {
-      siftUp(i);
-      siftDown(i);
-    }
+    const HeapEntry last = heap_.back();
+    heap_.pop_back();
+    if (i == static_cast<std::int32_t>(heap_.size())) return;
+    place(i, last);
+    if (i > 0 && higher(last, heap_[static_cast<std::size_t>((i - 1) / 2)])) siftUp(i);
+    else siftDown(i);
   }
 
   const DemGrid& dem_;
@@ -374,7 +378,7 @@ class GreedyInsertion {
   std::vector<double> error_;
   std::vector<std::int32_t> heap_position_;
   std::vector<std::uint8_t> pending_flag_;
-  std::vector<std::int32_t> heap_;
+  std::vector<HeapEntry> heap_;
   std::vector<std::int32_t> pending_;
 };
 
