@@ -1,0 +1,419 @@
+// Benchmark: our greedy-insertion TIN (buildTin, src/tin/build_tin.h) against the npm package
+// delatin (Agafonkin's JavaScript port of the same algorithm, Garland & Heckbert 1995) on the
+// same raster at the same max errors, side by side in one run.
+//
+//   terratiles_bench_tin RASTER... [--errors 0.5,1,2] [--runs 5] [--threads 1]
+//                        [--node node] [--script tools/bench/delatin/run_delatin.mjs]
+//
+// For each raster: reads it with readDem, writes its heights once as raw little-endian float32
+// (width * height, row-major, row 0 north: the layout Delatin reads, heightAt(x, y) =
+// data[width * y + x], with vertices on whole pixel indices, i.e. our GridPoint pixel centres).
+// For each max error: times buildTin (one untimed warm-up, then the median of --runs), then
+// spawns `node run_delatin.mjs RAW WIDTH HEIGHT MAX_ERROR RUNS OUT`, which times
+// `new Delatin(...)` + `run()` the same way and writes its mesh. Both meshes are then measured
+// by the same measureTin, so the achieved max and RMS error are computed identically.
+// Prints one table per raster and a summary with the ratios (speed = Delatin time / our time,
+// triangles = ours / Delatin's) against the targets (speed >= 5x, triangles <= +5 %).
+//
+// Rasters with nodata are skipped for both tools (Delatin needs a complete grid and buildTin
+// rejects nodata). Needs `npm install` in tools/bench/delatin once (see tools/bench/README.md).
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include <tbb/global_control.h>
+
+#include "formats/dem/read_dem.h"
+#include "src/base/error.h"
+#include "src/base/progress.h"
+#include "src/dem/dem_grid.h"
+#include "src/tin/build_tin.h"
+#include "src/tin/measure_tin.h"
+#include "src/tin/tin_mesh.h"
+
+extern char** environ;
+
+using namespace terratiles;
+namespace fs = std::filesystem;
+
+namespace {
+
+static_assert(std::endian::native == std::endian::little,
+              "the raw grid and Delatin's output file are little-endian");
+
+constexpr double kSpeedTarget = 5.0;          // Delatin time / our time, at least
+constexpr double kTriangleRatioTarget = 1.05;  // our triangles / Delatin's, at most
+
+struct BenchOptions {
+  std::vector<std::string> rasters;
+  std::vector<double> max_errors_m{0.5, 1.0, 2.0};
+  int runs = 5;
+  int threads = 1;
+  std::string node = "node";
+  // Next to this source file, so the program runs from any directory of a source checkout.
+  std::string script = (fs::path(__FILE__).parent_path() / "delatin" / "run_delatin.mjs").string();
+};
+
+constexpr const char* kUsage =
+    "usage: terratiles_bench_tin RASTER... [--errors 0.5,1,2] [--runs 5] [--threads 1]\n"
+    "                            [--node node] [--script PATH/run_delatin.mjs]\n"
+    "  --errors   max vertical errors in metres, comma-separated (default 0.5,1,2)\n"
+    "  --runs     timed runs per tool and error; the median is reported (default 5),\n"
+    "             after one untimed warm-up run per tool\n"
+    "  --threads  threads our buildTin may use (default 1: Delatin is single-threaded)\n"
+    "  --node     the node executable (default node, searched in PATH)\n"
+    "  --script   tools/bench/delatin/run_delatin.mjs (default: next to this source file)\n";
+
+double parseNumber(const std::string& text, const char* option) {
+  double value = 0;
+  const char* end = text.data() + text.size();
+  const auto [next, ec] = std::from_chars(text.data(), end, value);
+  if (ec != std::errc() || next != end || !std::isfinite(value)) {
+    throw Error(ErrorCode::Usage, std::string(option) + " expects a number, found '" + text + "'");
+  }
+  return value;
+}
+
+BenchOptions parseOptions(int argc, char** argv) {
+  BenchOptions options;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw Error(ErrorCode::Usage, arg + " expects a value\n" + kUsage);
+      return argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (arg == "--errors") {
+      options.max_errors_m.clear();
+      const std::string list = value();
+      for (std::size_t start = 0; start <= list.size();) {
+        const std::size_t comma = std::min(list.find(',', start), list.size());
+        const double error_m = parseNumber(list.substr(start, comma - start), "--errors");
+        if (!(error_m > 0)) {
+          throw Error(ErrorCode::Usage, "--errors: every max error must be > 0 m, found " + list);
+        }
+        options.max_errors_m.push_back(error_m);
+        start = comma + 1;
+      }
+    } else if (arg == "--runs") {
+      const std::string text = value();
+      const double runs = parseNumber(text, "--runs");
+      if (runs < 1 || runs != std::floor(runs)) {
+        throw Error(ErrorCode::Usage, "--runs expects a whole number >= 1, found " + text);
+      }
+      options.runs = static_cast<int>(runs);
+    } else if (arg == "--threads") {
+      const std::string text = value();
+      const double threads = parseNumber(text, "--threads");
+      if (threads < 1 || threads != std::floor(threads)) {
+        throw Error(ErrorCode::Usage, "--threads expects a whole number >= 1, found " + text);
+      }
+      options.threads = static_cast<int>(threads);
+    } else if (arg == "--node") {
+      options.node = value();
+    } else if (arg == "--script") {
+      options.script = value();
+    } else if (arg.starts_with("-")) {
+      throw Error(ErrorCode::Usage, "unknown option " + arg + "\n" + kUsage);
+    } else {
+      options.rasters.push_back(arg);
+    }
+  }
+  if (options.rasters.empty()) throw Error(ErrorCode::Usage, std::string("no RASTER given\n") + kUsage);
+  if (!fs::exists(options.script)) {
+    throw Error(ErrorCode::Usage, "--script: " + options.script +
+                                      " does not exist; pass the path of tools/bench/delatin/run_delatin.mjs");
+  }
+  return options;
+}
+
+double median(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  return values[values.size() / 2];
+}
+
+// A scratch directory for the raw grid and Delatin's meshes, removed on every exit path.
+class ScratchDirectory {
+ public:
+  ScratchDirectory() {
+    std::string pattern = (fs::temp_directory_path() / "terratiles_bench_tin.XXXXXX").string();
+    if (!mkdtemp(pattern.data())) {
+      throw Error(ErrorCode::Output, pattern + ": cannot create a scratch directory: " +
+                                         std::strerror(errno) + " (set TMPDIR to a writable one)");
+    }
+    path_ = pattern;
+  }
+  ~ScratchDirectory() {
+    std::error_code ignored;
+    fs::remove_all(path_, ignored);
+  }
+  ScratchDirectory(const ScratchDirectory&) = delete;
+  ScratchDirectory& operator=(const ScratchDirectory&) = delete;
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+void writeRawGrid(const DemGrid& dem, const fs::path& path) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(dem.heights_m.data()),
+            static_cast<std::streamsize>(dem.heights_m.size() * sizeof(float)));
+  if (!out.flush()) throw Error(ErrorCode::Output, path.string() + ": cannot write the raw grid");
+}
+
+// Runs argv (argv[0] searched in PATH) with our stdout and stderr; throws unless it exits 0.
+void runProcess(const std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
+  argv.push_back(nullptr);
+  std::fflush(stdout);
+  pid_t pid = 0;
+  if (const int code = posix_spawnp(&pid, argv[0], nullptr, nullptr, argv.data(), environ)) {
+    throw Error(ErrorCode::Usage, "cannot start " + args[0] + ": " + std::strerror(code) +
+                                      " (install Node.js >= 20 or pass --node PATH)");
+  }
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) throw Error(ErrorCode::Internal, "waitpid: " + std::string(std::strerror(errno)));
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    std::string command;
+    for (const std::string& arg : args) command += (command.empty() ? "" : " ") + arg;
+    throw Error(ErrorCode::Internal,
+                command + ": " +
+                    (WIFEXITED(status) ? "exited with status " + std::to_string(WEXITSTATUS(status))
+                                       : "killed by signal " + std::to_string(WTERMSIG(status))) +
+                    " (did you run npm install in tools/bench/delatin?)");
+  }
+}
+
+struct DelatinResult {
+  TinMesh mesh;
+  double build_s = 0;       // median of new Delatin() + run()
+  double run_only_s = 0;    // median of run() alone
+  double own_max_error_m = 0;  // Delatin's getMaxError(), for a cross-check
+  std::size_t flipped_triangles = 0;  // clockwise from above, flipped to our convention
+};
+
+// Reads the file run_delatin.mjs writes (its header comment is the format) into our frame:
+// Delatin's coords are (x = column, y = row) pixel indices; heights come from the DEM.
+DelatinResult readDelatinMesh(const fs::path& path, const DemGrid& dem) {
+  std::ifstream in(path, std::ios::binary);
+  const std::vector<char> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const std::string where = path.string() + ": ";
+  constexpr std::size_t kHeaderBytes = 8 + 4 * 4 + 4 * 8;
+  if (bytes.size() < kHeaderBytes || std::memcmp(bytes.data(), "DELATIN1", 8) != 0) {
+    throw Error(ErrorCode::Internal, where + "not a run_delatin.mjs output (no DELATIN1 header)");
+  }
+  std::uint32_t counts[4];
+  double values[4];
+  std::memcpy(counts, bytes.data() + 8, sizeof counts);
+  std::memcpy(values, bytes.data() + 8 + sizeof counts, sizeof values);
+  const std::size_t vertex_count = counts[0], triangle_count = counts[1];
+  if (bytes.size() != kHeaderBytes + 4 * (2 * vertex_count + 3 * triangle_count)) {
+    throw Error(ErrorCode::Internal, where + std::to_string(bytes.size()) + " bytes, expected " +
+                                         std::to_string(kHeaderBytes + 4 * (2 * vertex_count + 3 * triangle_count)));
+  }
+  DelatinResult result;
+  result.build_s = values[0];
+  result.run_only_s = values[1];
+  result.own_max_error_m = values[2];
+  std::vector<std::uint32_t> coords(2 * vertex_count);
+  std::memcpy(coords.data(), bytes.data() + kHeaderBytes, coords.size() * 4);
+  result.mesh.triangle_indices.resize(3 * triangle_count);
+  std::memcpy(result.mesh.triangle_indices.data(), bytes.data() + kHeaderBytes + coords.size() * 4,
+              result.mesh.triangle_indices.size() * 4);
+  result.mesh.vertices.resize(vertex_count);
+  for (std::size_t v = 0; v < vertex_count; ++v) {
+    const std::uint32_t col = coords[2 * v], row = coords[2 * v + 1];
+    if (col >= static_cast<std::uint32_t>(dem.width) || row >= static_cast<std::uint32_t>(dem.height)) {
+      throw Error(ErrorCode::Internal, where + "vertex " + std::to_string(v) + " at (" +
+                                           std::to_string(col) + ", " + std::to_string(row) +
+                                           ") is outside the grid");
+    }
+    result.mesh.vertices[v] = {static_cast<double>(col), static_cast<double>(row),
+                               dem.heightAt(static_cast<std::int32_t>(col), static_cast<std::int32_t>(row))};
+  }
+  for (const std::uint32_t index : result.mesh.triangle_indices) {
+    if (index >= vertex_count) throw Error(ErrorCode::Internal, where + "triangle index out of range");
+  }
+  return result;
+}
+
+// Cross product in the (col, row) plane: row grows south, so > 0 is clockwise seen from above.
+double crossColRow(const TinMesh& mesh, std::size_t t) {
+  const GridPoint& a = mesh.vertices[mesh.triangle_indices[3 * t]];
+  const GridPoint& b = mesh.vertices[mesh.triangle_indices[3 * t + 1]];
+  const GridPoint& c = mesh.vertices[mesh.triangle_indices[3 * t + 2]];
+  return (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+}
+
+std::size_t countClockwise(const TinMesh& mesh) {
+  std::size_t count = 0;
+  for (std::size_t t = 0; t < mesh.triangleCount(); ++t) count += crossColRow(mesh, t) > 0;
+  return count;
+}
+
+// Delatin's triangles come out counter-clockwise from above already (checked on every run);
+// any that do not are flipped so both meshes follow TinMesh's convention.
+std::size_t flipToCounterClockwise(TinMesh& mesh) {
+  std::size_t flipped = 0;
+  for (std::size_t t = 0; t < mesh.triangleCount(); ++t) {
+    if (crossColRow(mesh, t) > 0) {
+      std::swap(mesh.triangle_indices[3 * t + 1], mesh.triangle_indices[3 * t + 2]);
+      ++flipped;
+    }
+  }
+  return flipped;
+}
+
+// "ok" or what measureTin and the orientation check found wrong.
+std::string checksOf(const TinErrorStatistics& stats, std::size_t clockwise, double max_error_m) {
+  std::string issues;
+  auto add = [&](std::size_t count, const char* what) {
+    if (count) issues += (issues.empty() ? "" : ", ") + std::to_string(count) + " " + what;
+  };
+  add(stats.uncovered_valid_pixels, "uncovered pixels");
+  add(stats.degenerate_triangles, "degenerate triangles");
+  add(clockwise, "clockwise triangles");
+  // Both tools compare float32 heights in double; allow rounding, not a real excess.
+  if (stats.max_error_m > max_error_m * (1 + 1e-9) + 1e-9) issues += (issues.empty() ? "" : ", ") + std::string("max error above bound");
+  return issues.empty() ? "ok" : issues;
+}
+
+struct Row {
+  std::string raster;
+  double max_error_m = 0;
+  double ours_s = 0, delatin_s = 0;
+  std::size_t ours_triangles = 0, delatin_triangles = 0;
+};
+
+void printToolLine(const char* label, const char* tool, double seconds, const TinMesh& mesh,
+                   const TinErrorStatistics& stats, const std::string& checks) {
+  std::printf("%-10s %-11s %9.3f %10zu %10zu %9.4f %9.4f  %s\n", label, tool, seconds,
+              mesh.triangleCount(), mesh.vertices.size(), stats.max_error_m, stats.rms_error_m,
+              checks.c_str());
+}
+
+void benchRaster(const std::string& path, const BenchOptions& options, const fs::path& scratch,
+                 std::vector<Row>& summary) {
+  const DemGrid dem = readDem({path});
+  const std::string name = fs::path(path).filename().string();
+  const std::size_t nodata =
+      static_cast<std::size_t>(std::count_if(dem.heights_m.begin(), dem.heights_m.end(),
+                                             [](float h) { return std::isnan(h); }));
+  std::printf("\n== %s: %d x %d pixels, %s\n", name.c_str(), dem.width, dem.height, dem.crs_name.c_str());
+  if (nodata) {
+    std::printf("skipped: nodata (%zu of %zu pixels) for both tools; Delatin needs a complete grid "
+                "and buildTin rejects nodata\n", nodata, dem.pixelCount());
+    return;
+  }
+  std::printf("median of %d runs after 1 warm-up each; terratiles on %d thread(s); Delatin time = "
+              "new Delatin() + run()\n", options.runs, options.threads);
+  std::printf("%-10s %-11s %9s %10s %10s %9s %9s  %s\n", "max error", "tool", "time [s]",
+              "triangles", "vertices", "max [m]", "rms [m]", "checks");
+
+  const fs::path raw = scratch / "grid.f32";
+  writeRawGrid(dem, raw);
+  for (const double max_error_m : options.max_errors_m) {
+    std::fprintf(stderr, "%s at %g m: terratiles...\n", name.c_str(), max_error_m);
+    Progress quiet(ProgressMode::Quiet);
+    const TinOptions tin_options{.max_error_m = max_error_m};
+    TinMesh ours = buildTin(dem, tin_options, quiet);  // warm-up
+    std::vector<double> ours_runs;
+    for (int r = 0; r < options.runs; ++r) {
+      const auto start = std::chrono::steady_clock::now();
+      ours = buildTin(dem, tin_options, quiet);
+      ours_runs.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    }
+    const double ours_s = median(ours_runs);
+
+    std::fprintf(stderr, "%s at %g m: delatin...\n", name.c_str(), max_error_m);
+    char error_text[64];
+    std::snprintf(error_text, sizeof error_text, "%.17g", max_error_m);
+    const fs::path out = scratch / "delatin.bin";
+    runProcess({options.node, options.script, raw.string(), std::to_string(dem.width),
+                std::to_string(dem.height), error_text, std::to_string(options.runs), out.string()});
+    DelatinResult delatin = readDelatinMesh(out, dem);
+    delatin.flipped_triangles = flipToCounterClockwise(delatin.mesh);
+
+    const TinErrorStatistics ours_stats = measureTin(dem, ours);
+    const TinErrorStatistics delatin_stats = measureTin(dem, delatin.mesh);
+    char label[32];
+    std::snprintf(label, sizeof label, "%g m", max_error_m);
+    printToolLine(label, "terratiles", ours_s, ours, ours_stats,
+                  checksOf(ours_stats, countClockwise(ours), max_error_m));
+    std::string delatin_checks = checksOf(delatin_stats, 0, max_error_m);
+    if (delatin.flipped_triangles) {
+      delatin_checks += "; flipped " + std::to_string(delatin.flipped_triangles) + " clockwise";
+    }
+    char run_only[96];
+    std::snprintf(run_only, sizeof run_only, "; run() alone %.3f s, own getMaxError %.4f",
+                  delatin.run_only_s, delatin.own_max_error_m);
+    printToolLine("", "delatin", delatin.build_s, delatin.mesh, delatin_stats, delatin_checks + run_only);
+    const double speed = delatin.build_s / ours_s;
+    const double triangles = static_cast<double>(ours.triangleCount()) /
+                             static_cast<double>(delatin.mesh.triangleCount());
+    std::printf("%-10s %-11s %8.2fx %10.4f %10s %9s %9s  speed >= %gx: %s, triangles <= %g: %s\n", "",
+                "ratio", speed, triangles, "", "", "", kSpeedTarget, speed >= kSpeedTarget ? "yes" : "NO",
+                kTriangleRatioTarget, triangles <= kTriangleRatioTarget ? "yes" : "NO");
+    std::fflush(stdout);
+    summary.push_back({name, max_error_m, ours_s, delatin.build_s, ours.triangleCount(),
+                       delatin.mesh.triangleCount()});
+  }
+}
+
+int runBench(int argc, char** argv) {
+  const BenchOptions options = parseOptions(argc, argv);
+  // Delatin is single-threaded; by default so is buildTin here (it may use TBB internally).
+  tbb::global_control threads(tbb::global_control::max_allowed_parallelism,
+                              static_cast<std::size_t>(options.threads));
+  ScratchDirectory scratch;
+  std::vector<Row> summary;
+  for (const std::string& raster : options.rasters) benchRaster(raster, options, scratch.path(), summary);
+
+  std::printf("\n== summary: speed = delatin time / terratiles time (target >= %gx), "
+              "triangles = terratiles / delatin (target <= %g)\n", kSpeedTarget, kTriangleRatioTarget);
+  for (const Row& row : summary) {
+    const double speed = row.delatin_s / row.ours_s;
+    const double triangles = static_cast<double>(row.ours_triangles) / static_cast<double>(row.delatin_triangles);
+    std::printf("%-36s %6g m  speed %7.2fx %-3s  triangles %7.4f %s\n", row.raster.c_str(),
+                row.max_error_m, speed, speed >= kSpeedTarget ? "ok" : "NO", triangles,
+                triangles <= kTriangleRatioTarget ? "ok" : "NO");
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return runBench(argc, argv);
+  } catch (const Error& error) {
+    std::fprintf(stderr, "terratiles_bench_tin: error: %s\n", error.what());
+    return exitCodeFor(error.code());
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "terratiles_bench_tin: error: %s\n", error.what());
+    return 1;
+  }
+}
