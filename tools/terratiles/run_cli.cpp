@@ -7,6 +7,8 @@
 #include <csignal>
 #include <cstdio>
 #include <charconv>
+#include <chrono>
+#include <filesystem>
 #include <iomanip>
 #include <istream>
 #include <optional>
@@ -18,7 +20,11 @@
 #include "src/base/version.h"
 #include "src/geo/point_transform.h"
 #include "src/pipeline/run_pipeline.h"
+#include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
+#include "formats/tin/tin_file.h"
+#include "src/tin/build_tin.h"
+#include "src/tin/measure_tin.h"
 
 namespace terratiles {
 namespace {
@@ -150,6 +156,44 @@ void runTransform(const std::string& from, const std::string& to, const std::str
   out << std::flush;
 }
 
+struct TinCommandOptions {
+  std::vector<std::string> inputs;
+  std::string output;
+  double max_error_m = 0.5;
+  bool force = false;
+};
+
+// `terratiles tin`: DEM -> greedy-insertion TIN -> OFF/OBJ/PLY in the DEM's CRS.
+void runTinCommand(const TinCommandOptions& options, Progress& progress, bool quiet, std::ostream& err) {
+  const auto start = std::chrono::steady_clock::now();
+  tinFileFormatFor(options.output);  // validates the extension before any work
+  std::error_code ec;
+  if (std::filesystem::exists(options.output, ec) && !options.force) {
+    throw Error(ErrorCode::Output, options.output + ": file exists; use --force to replace it");
+  }
+  progress.beginStage("reading DEM", 0);
+  const DemGrid dem = readDem(options.inputs);
+  progress.endStage();
+  TinOptions tin_options;
+  tin_options.max_error_m = options.max_error_m;
+  const TinMesh mesh = buildTin(dem, tin_options, progress);
+  progress.beginStage("checking every pixel", 0);
+  const TinErrorStatistics errors = measureTin(dem, mesh);
+  progress.endStage();
+  writeTinFile(toCrsTin(mesh, dem.origin_x, dem.origin_y, dem.pixel_size_x), options.output);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!quiet) {
+    char line[512];
+    std::snprintf(line, sizeof line,
+                  "terratiles: wrote %s (%s): %zu vertices, %zu triangles; measured on %zu pixels: "
+                  "max error %.4f m (bound %.4g m), rms %.4f m; %.2f s\n",
+                  options.output.c_str(), dem.crs_name.c_str(), mesh.vertices.size(),
+                  mesh.triangleCount(), errors.measured_pixels, errors.max_error_m,
+                  options.max_error_m, errors.rms_error_m, seconds);
+    err << line << std::flush;
+  }
+}
+
 ProgressMode progressModeFor(const std::string& choice, bool quiet) {
   if (quiet || choice == "none") return ProgressMode::Quiet;
   if (choice == "json") return ProgressMode::Json;
@@ -237,6 +281,27 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Geoid grid: heights on the non-WGS84 side are orthometric (h = H + N)")
       ->check(CLI::ExistingFile);
 
+  TinCommandOptions tin;
+  CLI::App* tin_command = app.add_subcommand(
+      "tin", "Turn DEM rasters into one TIN by greedy insertion, written as OFF, OBJ or PLY");
+  tin_command->footer(kExitCodes);
+  tin_command->add_option("INPUT", tin.inputs, "DEM rasters (as for build); adjacent files are mosaicked")
+      ->required();
+  tin_command
+      ->add_option("-o,--output", tin.output,
+                   "Output TIN file, .off, .obj or .ply (binary), coordinates in the DEM's CRS")
+      ->required();
+  tin_command
+      ->add_option("--tin-max-error", tin.max_error_m,
+                   "Largest vertical error in metres allowed at any pixel")
+      ->capture_default_str();
+  tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
+  tin_command->add_flag("-q,--quiet", quiet, "No progress and no summary on stderr");
+  tin_command
+      ->add_option("--progress", progress_choice, "Progress on stderr: auto, bar, json, none")
+      ->check(CLI::IsMember({"auto", "bar", "json", "none"}))
+      ->capture_default_str();
+
   try {
     std::vector<const char*> argv;
     for (const auto& arg : args) argv.push_back(arg.c_str());
@@ -258,6 +323,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     throw Error(ErrorCode::Usage, message + " (see 'terratiles" + command + " --help')");
   }
 
+  if (tin_command->parsed()) {
+    Progress progress(progressModeFor(progress_choice, quiet));
+    InterruptGuard interrupt_guard;
+    runTinCommand(tin, progress, quiet, err);
+    return 0;
+  }
   if (transform_command->parsed()) {
     runTransform(transform_from, transform_to, transform_geoid, in, out);
     return 0;
