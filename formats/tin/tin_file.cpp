@@ -893,6 +893,32 @@ const char* const kFrameComment =
     "terratiles TIN: x east y north (CRS units) z height (m); triangles counter-clockwise "
     "seen from above";
 
+// The text formats share their body: vertex lines "<prefix>x y z", then face lines
+// "<face_tag> a b c" with indices counted from index_base.
+void appendTextMesh(const CrsTin& tin, AtomicFile& file, const char* vertex_prefix,
+                    char face_tag, std::uint64_t index_base) {
+  std::string& out = file.buffer();
+  for (const std::array<double, 3>& p : tin.positions) {
+    out += vertex_prefix;
+    appendNumber(out, p[0]);
+    out += ' ';
+    appendNumber(out, p[1]);
+    out += ' ';
+    appendNumber(out, p[2]);
+    out += '\n';
+    file.maybeFlush();
+  }
+  for (std::size_t i = 0; i < tin.triangle_indices.size(); i += 3) {
+    out += face_tag;
+    for (std::size_t k = 0; k < 3; ++k) {
+      out += ' ';
+      appendNumber(out, std::uint64_t{tin.triangle_indices[i + k]} + index_base);
+    }
+    out += '\n';
+    file.maybeFlush();
+  }
+}
+
 void writeOff(const CrsTin& tin, AtomicFile& file) {
   std::string& out = file.buffer();
   out += "OFF\n";
@@ -900,24 +926,7 @@ void writeOff(const CrsTin& tin, AtomicFile& file) {
   out += ' ';
   appendNumber(out, std::uint64_t{tin.triangleCount()});
   out += " 0\n";
-  for (const std::array<double, 3>& p : tin.positions) {
-    appendNumber(out, p[0]);
-    out += ' ';
-    appendNumber(out, p[1]);
-    out += ' ';
-    appendNumber(out, p[2]);
-    out += '\n';
-    file.maybeFlush();
-  }
-  for (std::size_t i = 0; i < tin.triangle_indices.size(); i += 3) {
-    out += '3';
-    for (std::size_t k = 0; k < 3; ++k) {
-      out += ' ';
-      appendNumber(out, std::uint64_t{tin.triangle_indices[i + k]});
-    }
-    out += '\n';
-    file.maybeFlush();
-  }
+  appendTextMesh(tin, file, "", '3', 0);
 }
 
 void writeObj(const CrsTin& tin, AtomicFile& file) {
@@ -925,25 +934,7 @@ void writeObj(const CrsTin& tin, AtomicFile& file) {
   out += "# ";
   out += kFrameComment;
   out += '\n';
-  for (const std::array<double, 3>& p : tin.positions) {
-    out += "v ";
-    appendNumber(out, p[0]);
-    out += ' ';
-    appendNumber(out, p[1]);
-    out += ' ';
-    appendNumber(out, p[2]);
-    out += '\n';
-    file.maybeFlush();
-  }
-  for (std::size_t i = 0; i < tin.triangle_indices.size(); i += 3) {
-    out += 'f';
-    for (std::size_t k = 0; k < 3; ++k) {
-      out += ' ';
-      appendNumber(out, std::uint64_t{tin.triangle_indices[i + k]} + 1);  // OBJ is 1-based
-    }
-    out += '\n';
-    file.maybeFlush();
-  }
+  appendTextMesh(tin, file, "v ", 'f', 1);  // OBJ indices are 1-based
 }
 
 void writePly(const CrsTin& tin, AtomicFile& file) {

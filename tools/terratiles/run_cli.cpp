@@ -194,6 +194,16 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   }
 }
 
+// -q and --progress, shared by the commands that do long work.
+void addProgressOptions(CLI::App& command, bool& quiet, std::string& choice) {
+  command.add_flag("-q,--quiet", quiet, "No progress and no summary on stderr");
+  command
+      .add_option("--progress", choice,
+                  "Progress on stderr: auto (a bar on a terminal, else nothing), bar, json, none")
+      ->check(CLI::IsMember({"auto", "bar", "json", "none"}))
+      ->capture_default_str();
+}
+
 ProgressMode progressModeFor(const std::string& choice, bool quiet) {
   if (quiet || choice == "none") return ProgressMode::Quiet;
   if (choice == "json") return ProgressMode::Json;
@@ -253,12 +263,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Draco position quantisation step in metres (power of two), shared by all "
                    "tiles")
       ->capture_default_str();
-  build_command->add_flag("-q,--quiet", quiet, "No progress and no summary on stderr");
-  build_command
-      ->add_option("--progress", progress_choice,
-                   "Progress on stderr: auto (a bar on a terminal, else nothing), bar, json, none")
-      ->check(CLI::IsMember({"auto", "bar", "json", "none"}))
-      ->capture_default_str();
+  addProgressOptions(*build_command, quiet, progress_choice);
 
   std::string transform_from, transform_to, transform_geoid;
   CLI::App* transform_command = app.add_subcommand(
@@ -296,11 +301,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Largest vertical error in metres allowed at any pixel")
       ->capture_default_str();
   tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
-  tin_command->add_flag("-q,--quiet", quiet, "No progress and no summary on stderr");
-  tin_command
-      ->add_option("--progress", progress_choice, "Progress on stderr: auto, bar, json, none")
-      ->check(CLI::IsMember({"auto", "bar", "json", "none"}))
-      ->capture_default_str();
+  addProgressOptions(*tin_command, quiet, progress_choice);
 
   try {
     std::vector<const char*> argv;
