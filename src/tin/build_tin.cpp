@@ -119,7 +119,17 @@ inline bool inCircle(Pixel a, Pixel b, Pixel c, Pixel d) {
 class GreedyInsertion {
  public:
   GreedyInsertion(const DemGrid& dem, double max_error_m)
-      : dem_(dem), width_(dem.width), max_error_(max_error_m) {}
+      : dem_(dem), width_(dem.width), max_error_(max_error_m) {
+    double sum = 0;
+    std::size_t valid = 0;
+    for (const float h : dem.heights_m) {
+      if (std::isnan(h)) continue;
+      sum += h;
+      ++valid;
+    }
+    has_nodata_ = valid < dem.pixelCount();
+    virtual_height_ = valid ? sum / static_cast<double>(valid) : 0.0;
+  }
 
   void run(Progress& progress) {
     const Pixel corners[4] = {{0, 0}, {width_ - 1, 0}, {0, dem_.height - 1}, {width_ - 1, dem_.height - 1}};
@@ -146,28 +156,39 @@ class GreedyInsertion {
     }
   }
 
+  // The triangulation without the triangles over nodata or at a virtual corner, and
+  // without the vertices only those used.
   TinMesh mesh() const {
     TinMesh out;
-    out.vertices.reserve(coords_.size());
-    for (const Pixel& p : coords_) {
-      out.vertices.push_back({static_cast<double>(p.x), static_cast<double>(p.y),
-                              static_cast<double>(dem_.heightAt(p.x, p.y))});
-    }
-    // Positive in (col, row) is clockwise seen from above (row grows south): swap two
-    // corners for TinMesh's counter-clockwise convention.
+    constexpr std::uint32_t kUnused = std::numeric_limits<std::uint32_t>::max();
+    std::vector<std::uint32_t> output_index(coords_.size(), kUnused);
     out.triangle_indices.reserve(triangles_.size());
     for (std::size_t e = 0; e < triangles_.size(); e += 3) {
-      out.triangle_indices.insert(out.triangle_indices.end(),
-                                  {static_cast<std::uint32_t>(triangles_[e]),
-                                   static_cast<std::uint32_t>(triangles_[e + 2]),
-                                   static_cast<std::uint32_t>(triangles_[e + 1])});
+      if (dropped_[e / 3]) continue;
+      // Positive in (col, row) is clockwise seen from above (row grows south): swap two
+      // corners for TinMesh's counter-clockwise convention.
+      for (const std::size_t k : {e, e + 2, e + 1}) {
+        const auto v = static_cast<std::size_t>(triangles_[k]);
+        if (output_index[v] == kUnused) {
+          output_index[v] = static_cast<std::uint32_t>(out.vertices.size());
+          const Pixel p = coords_[v];
+          out.vertices.push_back({static_cast<double>(p.x), static_cast<double>(p.y),
+                                  static_cast<double>(dem_.heightAt(p.x, p.y))});
+        }
+        out.triangle_indices.push_back(output_index[v]);
+      }
     }
     return out;
   }
 
  private:
+  // A nodata corner becomes a virtual vertex (height: the mean of the valid pixels): its
+  // triangles are refined like mixed ones and dropped at the end.
   std::int32_t addVertex(Pixel p) {
     coords_.push_back(p);
+    const float h = dem_.heightAt(p.x, p.y);
+    vertex_virtual_.push_back(std::isnan(h) ? 1 : 0);
+    vertex_height_.push_back(std::isnan(h) ? virtual_height_ : static_cast<double>(h));
     return static_cast<std::int32_t>(coords_.size()) - 1;
   }
 
@@ -178,6 +199,7 @@ class GreedyInsertion {
     halfedges_.insert(halfedges_.end(), {kNone, kNone, kNone});
     candidate_.push_back({});
     error_.push_back(0);
+    dropped_.push_back(0);
     heap_position_.push_back(kNone);
     pending_flag_.push_back(0);
     link(3 * t, ab);
@@ -320,7 +342,12 @@ class GreedyInsertion {
   // Rasterises triangle t row by row (exact integer spans) and keeps its worst pixel.
   void scanTriangle(std::int32_t t) {
     const Pixel a = vertex(3 * t), b = vertex(3 * t + 1), c = vertex(3 * t + 2);
-    const double za = dem_.heightAt(a.x, a.y), zb = dem_.heightAt(b.x, b.y), zc = dem_.heightAt(c.x, c.y);
+    const auto va = static_cast<std::size_t>(triangles_[static_cast<std::size_t>(3 * t)]);
+    const auto vb = static_cast<std::size_t>(triangles_[static_cast<std::size_t>(3 * t + 1)]);
+    const auto vc = static_cast<std::size_t>(triangles_[static_cast<std::size_t>(3 * t + 2)]);
+    const double za = vertex_height_[va], zb = vertex_height_[vb], zc = vertex_height_[vc];
+    const bool touches_virtual = vertex_virtual_[va] || vertex_virtual_[vb] || vertex_virtual_[vc];
+    bool covers_nodata = false;
     const std::int64_t area2 = orient(a, b, c);
     TERRATILES_ASSERT(area2 > 0);
     // Plane z = gx * x + gy * y + z0 through the three vertices.
@@ -371,6 +398,23 @@ class GreedyInsertion {
       if (empty || x0 > x1) continue;
       const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
       const double row_z = gy * y + z0;
+      if (has_nodata_) {
+        // Scalar: skip nodata (noting it) and the vertices, which are always valid or virtual.
+        for (std::int64_t x = x0; x <= x1; ++x) {
+          const float h = row[x];
+          if (std::isnan(h)) {
+            covers_nodata = true;
+            continue;
+          }
+          if ((x == a.x && y == a.y) || (x == b.x && y == b.y) || (x == c.x && y == c.y)) continue;
+          const double error = std::fabs(gx * static_cast<double>(x) + row_z - h);
+          if (error > best_error) {
+            best_error = error;
+            best = {static_cast<std::int32_t>(x), y};
+          }
+        }
+        continue;
+      }
       // First the row's largest error (vectorised), then its position only if it wins.
       const double row_max = rowMaxError(row, x0, x1, gx, row_z);
       if (row_max > best_error) {
@@ -387,8 +431,16 @@ class GreedyInsertion {
     // the triangulation.
     if ((best.x == a.x && best.y == a.y) || (best.x == b.x && best.y == b.y) ||
         (best.x == c.x && best.y == c.y)) {
-      best_error = 0;
+      best_error = -1;  // no candidate
     }
+    // A triangle over nodata or at a virtual corner is dropped from the result; while it
+    // still holds a valid pixel other than its vertices it is "mixed" and refined before any
+    // error-driven insertion (inserting its worst valid pixel), so the kept triangles end up
+    // following the valid data's edge to within one pixel.
+    const bool dropped = covers_nodata || touches_virtual;
+    dropped_[static_cast<std::size_t>(t)] = dropped ? 1 : 0;
+    if (dropped) best_error = best_error >= 0 ? kMixedPriority + best_error : 0;
+    best_error = std::max(best_error, 0.0);
     candidate_[static_cast<std::size_t>(t)] = best;
     error_[static_cast<std::size_t>(t)] = best_error;
   }
@@ -450,7 +502,14 @@ class GreedyInsertion {
   const DemGrid& dem_;
   const std::int32_t width_;
   const double max_error_;
+  static constexpr double kMixedPriority = 1e12;  // above any height error on Earth
+
+  bool has_nodata_ = false;
+  double virtual_height_ = 0;
   std::vector<Pixel> coords_;
+  std::vector<double> vertex_height_;
+  std::vector<std::uint8_t> vertex_virtual_;
+  std::vector<std::uint8_t> dropped_;
   std::vector<std::int32_t> triangles_;
   std::vector<std::int32_t> halfedges_;
   std::vector<Pixel> candidate_;
@@ -472,17 +531,16 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
     throw Error(ErrorCode::Input, "the DEM is " + std::to_string(dem.width) + " x " +
                                       std::to_string(dem.height) + " pixels; expected at least 2 x 2");
   }
-  for (float h : dem.heights_m) {
-    if (std::isnan(h)) {
-      throw Error(ErrorCode::Input, "the DEM has nodata pixels, which the greedy-insertion TIN "
-                                    "does not handle yet; fill them (gdal_fillnodata.py) first");
-    }
-  }
   progress.beginStage("TIN (greedy insertion)", dem.pixelCount());
   GreedyInsertion insertion(dem, options.max_error_m);
   insertion.run(progress);
   progress.endStage();
-  return insertion.mesh();
+  TinMesh mesh = insertion.mesh();
+  if (mesh.triangleCount() == 0) {
+    throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
+                                  "valid pixels; expected a DEM with some contiguous data");
+  }
+  return mesh;
 }
 
 }  // namespace terratiles

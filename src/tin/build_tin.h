@@ -10,10 +10,13 @@
 // Vertices sit on pixel centres (GridPoint col/row are whole numbers); the result is
 // counter-clockwise seen from above (TinMesh's convention).
 //
-// Guarantee: every pixel of the grid is within max_error_m of the TIN, measured at pixel
-// centres by linear interpolation in the triangle containing the pixel.
+// Guarantee: every valid pixel inside the TIN is within max_error_m of it, measured at
+// pixel centres by linear interpolation in the triangle containing the pixel.
+// Nodata (NaN): no triangle covers a nodata pixel. Nodata corners become virtual vertices,
+// and a triangle covering nodata or a virtual vertex is refined while it holds valid pixels
+// other than its vertices, then left out, so the TIN follows holes and ragged borders of
+// the valid data to within one pixel (a valid pixel left uncovered touches nodata).
 // Memory: O(pixels) for the candidate bookkeeping plus O(vertices).
-// Nodata (NaN) pixels are not supported yet: Error(Input).
 
 #include "src/base/progress.h"
 #include "src/dem/dem_grid.h"

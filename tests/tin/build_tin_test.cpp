@@ -99,8 +99,45 @@ TopologyReport checkTopology(const TinMesh& mesh, int width, int height) {
   return report;
 }
 
+// A valid pixel no triangle covers must touch nodata (8-neighbourhood): the TIN follows the
+// valid data's edge to within one pixel.
+std::size_t uncoveredAwayFromNodata(const DemGrid& dem, const TinMesh& mesh) {
+  // Rasterise coverage with measureTin's rule (closed triangles).
+  std::vector<std::uint8_t> covered(dem.pixelCount(), 0);
+  const auto& idx = mesh.triangle_indices;
+  for (std::size_t t = 0; t < idx.size(); t += 3) {
+    const GridPoint& a = mesh.vertices[idx[t]];
+    const GridPoint& b = mesh.vertices[idx[t + 1]];
+    const GridPoint& c = mesh.vertices[idx[t + 2]];
+    const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+    for (int row = int(std::min({a.row, b.row, c.row})); row <= int(std::max({a.row, b.row, c.row})); ++row) {
+      for (int col = int(std::min({a.col, b.col, c.col})); col <= int(std::max({a.col, b.col, c.col})); ++col) {
+        const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
+        const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
+        if (wa >= -1e-12 && wb >= -1e-12 && 1 - wa - wb >= -1e-12) covered[dem.index(col, row)] = 1;
+      }
+    }
+  }
+  std::size_t away = 0;
+  for (int row = 0; row < dem.height; ++row) {
+    for (int col = 0; col < dem.width; ++col) {
+      if (!dem.isValid(col, row) || covered[dem.index(col, row)]) continue;
+      bool touches_nodata = false;
+      for (int dr = -1; dr <= 1; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int r = row + dr, c = col + dc;
+          if (r >= 0 && c >= 0 && r < dem.height && c < dem.width && !dem.isValid(c, r)) touches_nodata = true;
+        }
+      }
+      if (!touches_nodata) ++away;
+    }
+  }
+  return away;
+}
+
 void checkTin(const DemGrid& dem, double max_error_m) {
   CAPTURE(max_error_m);
+  const bool has_nodata = computeStatistics(dem).valid_pixels < dem.pixelCount();
   Progress progress;
   TinOptions options;
   options.max_error_m = max_error_m;
@@ -111,18 +148,24 @@ void checkTin(const DemGrid& dem, double max_error_m) {
   // interpolates with barycentric weights: integer heights (SRTM) hit the bound exactly and
   // the two evaluations differ by rounding only, so allow a nanometre.
   CHECK(errors.max_error_m <= max_error_m + 1e-9);
-  CHECK(errors.uncovered_valid_pixels == 0);
   CHECK(errors.covered_nodata_pixels == 0);
   CHECK(errors.degenerate_triangles == 0);
-  CHECK(errors.measured_pixels == dem.pixelCount());
+  if (has_nodata) {
+    CHECK(uncoveredAwayFromNodata(dem, mesh) == 0);
+  } else {
+    CHECK(errors.uncovered_valid_pixels == 0);
+    CHECK(errors.measured_pixels == dem.pixelCount());
+  }
   const TopologyReport topology = checkTopology(mesh, dem.width, dem.height);
   CHECK(topology.non_manifold_edges == 0);
   CHECK(topology.inconsistent_edges == 0);
   CHECK(topology.clockwise_triangles == 0);
-  CHECK(topology.boundary_off_border == 0);
   CHECK(topology.unused_vertices == 0);
   CHECK(topology.non_delaunay_edges == 0);
-  CHECK(topology.euler == 1);
+  if (!has_nodata) {  // the full rectangle: a disk whose border is the raster's
+    CHECK(topology.boundary_off_border == 0);
+    CHECK(topology.euler == 1);
+  }
   // Vertices are pixels carrying the DEM's own height.
   for (const GridPoint& v : mesh.vertices) {
     REQUIRE(v.col == std::floor(v.col));
@@ -160,13 +203,23 @@ TEST_SUITE("tin") {
     CHECK(fine > coarse);
   }
 
-  TEST_CASE("bad options and nodata are refused with a clear error") {
+  TEST_CASE("bad options are refused with a clear error") {
     const DemGrid dem = test::makeDem(8, 8, 1.0, [](int c, int) { return c; });
     Progress progress;
     CHECK_THROWS_WITH(buildTin(dem, TinOptions{0.0}, progress), doctest::Contains("expected a positive number of metres"));
-    DemGrid holes = dem;
-    holes.heights_m[10] = DemGrid::kNoData;
-    CHECK_THROWS_WITH(buildTin(holes, TinOptions{1.0}, progress), doctest::Contains("nodata pixels"));
+    const DemGrid specks = test::makeDem(8, 8, 1.0, [](int c, int r) { return (c + r) % 3 == 0 ? 1.0 : std::nan(""); });
+    CHECK_THROWS_WITH(buildTin(specks, TinOptions{1.0}, progress), doctest::Contains("no triangle can be built"));
+  }
+
+  TEST_CASE("holes nodata corners and ragged borders are followed without covering nodata") {
+    // A cone with a round hole, a nodata corner and a ragged nodata margin on one side.
+    const DemGrid dem = test::makeDem(80, 64, 1.0, [](int c, int r) {
+      if (std::hypot(c - 50.0, r - 30.0) < 9.5) return std::nan("");
+      if (c + r < 12) return std::nan("");
+      if (c > 70 + (r * 7) % 5) return std::nan("");
+      return 400.0 - 2.0 * std::hypot(c - 30.3, r - 25.7);
+    });
+    for (double e : {2.0, 0.5, 0.1}) checkTin(dem, e);
   }
 }
 
@@ -183,6 +236,11 @@ TEST_SUITE("tin-real") {
   }
   TEST_CASE("the Minnesota lidar TIN holds 0.5 1 and 2 m on every pixel") {
     const DemGrid dem = readDem({test::sharedData("us_mn_lidar_dtm_1m_26915.tif")});
+    for (double e : {0.5, 1.0, 2.0}) checkTin(dem, e);
+  }
+  TEST_CASE("the Ontario lidar TIN with nodata holds 0.5 1 and 2 m and covers no nodata") {
+    const DemGrid dem = readDem({test::sharedData("ca_on_lidar_dtm_1m_26917.tif")});
+    REQUIRE(computeStatistics(dem).valid_pixels < dem.pixelCount());  // it does have nodata
     for (double e : {0.5, 1.0, 2.0}) checkTin(dem, e);
   }
   TEST_CASE("the SRTM and ETOPO5 TINs hold 10 and 20 m on every pixel") {
