@@ -4,7 +4,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <unordered_map>
 #include <vector>
+
+#include <tbb/parallel_for.h>
 
 #include "src/base/error.h"
 
@@ -116,29 +119,50 @@ inline bool inCircle(Pixel a, Pixel b, Pixel c, Pixel d) {
 // triangle e / 3 runs from vertex triangles[e] to triangles[next(e)], halfedges[e] is its
 // twin or kNone on the hull), each triangle's candidate pixel and error, and a max-heap of
 // the triangles whose error exceeds the bound.
+// The pixels a triangulation covers: [x0, x1] x [y0, y1], inclusive.
+struct Window {
+  std::int32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
+// What every window of one DEM shares.
+struct DemFacts {
+  bool has_nodata = false;
+  double virtual_height = 0;  // the mean valid height, for virtual (nodata) corners
+};
+
+DemFacts demFacts(const DemGrid& dem) {
+  double sum = 0;
+  std::size_t valid = 0;
+  for (const float h : dem.heights_m) {
+    if (std::isnan(h)) continue;
+    sum += h;
+    ++valid;
+  }
+  return {valid < dem.pixelCount(), valid ? sum / static_cast<double>(valid) : 0.0};
+}
+
 class GreedyInsertion {
  public:
-  GreedyInsertion(const DemGrid& dem, double max_error_m)
-      : dem_(dem), width_(dem.width), max_error_(max_error_m) {
-    double sum = 0;
-    std::size_t valid = 0;
-    for (const float h : dem.heights_m) {
-      if (std::isnan(h)) continue;
-      sum += h;
-      ++valid;
-    }
-    has_nodata_ = valid < dem.pixelCount();
-    virtual_height_ = valid ? sum / static_cast<double>(valid) : 0.0;
-  }
+  GreedyInsertion(const DemGrid& dem, double max_error_m, Window window, const DemFacts& facts)
+      : dem_(dem), width_(dem.width), max_error_(max_error_m), window_(window),
+        has_nodata_(facts.has_nodata), virtual_height_(facts.virtual_height) {}
 
-  void run(Progress& progress) {
-    const Pixel corners[4] = {{0, 0}, {width_ - 1, 0}, {0, dem_.height - 1}, {width_ - 1, dem_.height - 1}};
+  // fixed_border: the pixels of the window's outline inserted before any error-driven
+  // insertion (the shared border polylines of a windowed build); with it, the outline is
+  // final. Without it (one window over the whole grid), the outline is refined like the rest.
+  void run(Progress* progress, const std::vector<Pixel>* fixed_border = nullptr) {
+    const Pixel corners[4] = {{window_.x0, window_.y0}, {window_.x1, window_.y0},
+                              {window_.x0, window_.y1}, {window_.x1, window_.y1}};
     for (const Pixel& corner : corners) addVertex(corner);
     // Two triangles over the grid, positively oriented in (col, row): (0, 3, 2) and (0, 1, 3),
     // sharing the diagonal 0-3.
     const std::int32_t t0 = addTriangle(0, 3, 2, kNone, kNone, kNone);
     const std::int32_t t1 = addTriangle(0, 1, 3, kNone, kNone, kNone);
     link(3 * t0 + 0, 3 * t1 + 2);  // edge 0->3 of t0 and 3->0 of t1
+    if (fixed_border) {
+      border_fixed_ = true;
+      for (const Pixel& p : *fixed_border) insertBorderVertex(p);
+    }
     flushPending();
 
     const double total = static_cast<double>(dem_.pixelCount());
@@ -149,11 +173,24 @@ class GreedyInsertion {
       flushPending();
       // Progress by vertices relative to a rough budget; the stage total is the pixel count.
       const auto done = static_cast<std::uint64_t>(std::min(total, static_cast<double>(coords_.size()) * 8));
-      if (done - reported >= 4096) {
-        progress.advance(done - reported);
+      if (progress && done - reported >= 4096) {
+        progress->advance(done - reported);
         reported = done;
       }
     }
+  }
+
+  // Inserts a pixel of the window's outline (not a corner) into the hull triangle whose
+  // edge holds it. Linear search: only used while the triangulation is the outline.
+  void insertBorderVertex(Pixel p) {
+    for (std::int32_t t = 0; t < static_cast<std::int32_t>(triangles_.size() / 3); ++t) {
+      const Pixel a = vertex(3 * t), b = vertex(3 * t + 1), c = vertex(3 * t + 2);
+      if (orient(a, b, p) >= 0 && orient(b, c, p) >= 0 && orient(c, a, p) >= 0) {
+        insert(p, t);
+        return;
+      }
+    }
+    TERRATILES_ASSERT(false);
   }
 
   // The triangulation without the triangles over nodata or at a virtual corner, and
@@ -395,6 +432,14 @@ class GreedyInsertion {
           empty = true;
         }
       }
+      if (border_fixed_) {
+        // A fixed outline's pixels are within the bound by its polyline (1D arithmetic that
+        // the plane would only repeat up to rounding): never candidates, or a vertex could
+        // appear on one side of a shared border only.
+        if (y == window_.y0 || y == window_.y1) continue;
+        x0 = std::max<std::int64_t>(x0, window_.x0 + 1);
+        x1 = std::min<std::int64_t>(x1, window_.x1 - 1);
+      }
       if (empty || x0 > x1) continue;
       const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
       const double row_z = gy * y + z0;
@@ -504,8 +549,10 @@ class GreedyInsertion {
   const double max_error_;
   static constexpr double kMixedPriority = 1e12;  // above any height error on Earth
 
-  bool has_nodata_ = false;
-  double virtual_height_ = 0;
+  const Window window_;
+  bool border_fixed_ = false;
+  const bool has_nodata_;
+  const double virtual_height_;
   std::vector<Pixel> coords_;
   std::vector<double> vertex_height_;
   std::vector<std::uint8_t> vertex_virtual_;
@@ -522,6 +569,58 @@ class GreedyInsertion {
 
 }  // namespace
 
+namespace {
+
+// Border polylines for the windowed build: the positions along one straight run of pixels
+// (a window side, endpoints included) that make it within max_error of the DEM by linear
+// interpolation, by recursive worst-pixel insertion. A run with nodata keeps every valid
+// pixel (and its endpoints, which become virtual when nodata).
+std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double max_error_m) {
+  const std::int32_t length = std::max(std::abs(to.x - from.x), std::abs(to.y - from.y));
+  const std::int32_t dx = (to.x > from.x) - (to.x < from.x), dy = (to.y > from.y) - (to.y < from.y);
+  auto at = [&](std::int32_t i) { return Pixel{from.x + dx * i, from.y + dy * i}; };
+  auto height = [&](std::int32_t i) { const Pixel p = at(i); return dem.heightAt(p.x, p.y); };
+  std::vector<std::uint8_t> keep(static_cast<std::size_t>(length) + 1, 0);
+  keep.front() = keep.back() = 1;
+  bool has_nodata = false;
+  for (std::int32_t i = 0; i <= length; ++i) has_nodata |= std::isnan(height(i));
+  if (has_nodata) {
+    for (std::int32_t i = 1; i < length; ++i) keep[static_cast<std::size_t>(i)] = !std::isnan(height(i));
+  } else {
+    std::vector<std::pair<std::int32_t, std::int32_t>> segments{{0, length}};
+    while (!segments.empty()) {
+      const auto [i0, i1] = segments.back();
+      segments.pop_back();
+      const double h0 = height(i0), h1 = height(i1);
+      double worst = max_error_m;
+      std::int32_t worst_i = -1;
+      for (std::int32_t i = i0 + 1; i < i1; ++i) {
+        const double line = h0 + (h1 - h0) * (i - i0) / (i1 - i0);
+        const double error = std::fabs(line - height(i));
+        if (error > worst) worst = error, worst_i = i;
+      }
+      if (worst_i < 0) continue;
+      keep[static_cast<std::size_t>(worst_i)] = 1;
+      segments.push_back({i0, worst_i});
+      segments.push_back({worst_i, i1});
+    }
+  }
+  std::vector<Pixel> kept;
+  for (std::int32_t i = 1; i < length; ++i) {
+    if (keep[static_cast<std::size_t>(i)]) kept.push_back(at(i));
+  }
+  return kept;  // interior positions only; the endpoints are window corners
+}
+
+std::vector<std::int32_t> blockEdges(std::int32_t length, std::int32_t block) {
+  std::vector<std::int32_t> edges;
+  for (std::int32_t p = 0; p < length - 1; p += block) edges.push_back(p);
+  edges.push_back(length - 1);
+  return edges;
+}
+
+}  // namespace
+
 TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progress) {
   if (!(options.max_error_m > 0) || !std::isfinite(options.max_error_m)) {
     throw Error(ErrorCode::Usage, "--tin-max-error is " + std::to_string(options.max_error_m) +
@@ -531,11 +630,76 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
     throw Error(ErrorCode::Input, "the DEM is " + std::to_string(dem.width) + " x " +
                                       std::to_string(dem.height) + " pixels; expected at least 2 x 2");
   }
-  progress.beginStage("TIN (greedy insertion)", dem.pixelCount());
-  GreedyInsertion insertion(dem, options.max_error_m);
-  insertion.run(progress);
+  const DemFacts facts = demFacts(dem);
+  const bool windowed = options.block_pixels > 0 &&
+                        (dem.width > options.block_pixels + 1 || dem.height > options.block_pixels + 1);
+  if (!windowed) {
+    progress.beginStage("TIN (greedy insertion)", dem.pixelCount());
+    GreedyInsertion insertion(dem, options.max_error_m, {0, 0, dem.width - 1, dem.height - 1}, facts);
+    insertion.run(&progress);
+    progress.endStage();
+    TinMesh mesh = insertion.mesh();
+    if (mesh.triangleCount() == 0) {
+      throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
+                                    "valid pixels; expected a DEM with some contiguous data");
+    }
+    return mesh;
+  }
+
+  // Windowed: the shared border polylines first, then every window on its own (in parallel),
+  // then an exact stitch by pixel position.
+  const std::vector<std::int32_t> xs = blockEdges(dem.width, options.block_pixels);
+  const std::vector<std::int32_t> ys = blockEdges(dem.height, options.block_pixels);
+  const std::size_t nx = xs.size() - 1, ny = ys.size() - 1;
+  // vertical[i][j]: column xs[i] between ys[j] and ys[j+1]; horizontal[j][i]: row ys[j]
+  // between xs[i] and xs[i+1].
+  std::vector<std::vector<std::vector<Pixel>>> vertical(xs.size(), std::vector<std::vector<Pixel>>(ny));
+  std::vector<std::vector<std::vector<Pixel>>> horizontal(ys.size(), std::vector<std::vector<Pixel>>(nx));
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    for (std::size_t j = 0; j < ny; ++j) {
+      vertical[i][j] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i], ys[j + 1]}, options.max_error_m);
+    }
+  }
+  for (std::size_t j = 0; j < ys.size(); ++j) {
+    for (std::size_t i = 0; i < nx; ++i) {
+      horizontal[j][i] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i + 1], ys[j]}, options.max_error_m);
+    }
+  }
+  progress.beginStage("TIN (greedy insertion, windowed)", nx * ny);
+  std::vector<TinMesh> blocks(nx * ny);
+  std::size_t next_block = 0;
+  constexpr std::size_t kBatch = 16;  // report progress and check Ctrl-C between batches
+  while (next_block < blocks.size()) {
+    const std::size_t end = std::min(blocks.size(), next_block + kBatch);
+    tbb::parallel_for(next_block, end, [&](std::size_t b) {
+      const std::size_t i = b % nx, j = b / nx;
+      std::vector<Pixel> border;
+      for (const auto* run : {&horizontal[j][i], &horizontal[j + 1][i], &vertical[i][j], &vertical[i + 1][j]}) {
+        border.insert(border.end(), run->begin(), run->end());
+      }
+      GreedyInsertion insertion(dem, options.max_error_m, {xs[i], ys[j], xs[i + 1], ys[j + 1]}, facts);
+      insertion.run(nullptr, &border);
+      blocks[b] = insertion.mesh();
+    });
+    progress.advance(end - next_block);
+    next_block = end;
+  }
   progress.endStage();
-  TinMesh mesh = insertion.mesh();
+
+  // Stitch: vertices on shared borders have the same pixel position in both windows.
+  TinMesh mesh;
+  std::unordered_map<std::uint64_t, std::uint32_t> index_of;
+  for (const TinMesh& block : blocks) {
+    std::vector<std::uint32_t> remap(block.vertices.size());
+    for (std::size_t v = 0; v < block.vertices.size(); ++v) {
+      const GridPoint& p = block.vertices[v];
+      const std::uint64_t key = (static_cast<std::uint64_t>(p.row) << 32) | static_cast<std::uint32_t>(p.col);
+      const auto [it, inserted] = index_of.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
+      if (inserted) mesh.vertices.push_back(p);
+      remap[v] = it->second;
+    }
+    for (const std::uint32_t v : block.triangle_indices) mesh.triangle_indices.push_back(remap[v]);
+  }
   if (mesh.triangleCount() == 0) {
     throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
                                   "valid pixels; expected a DEM with some contiguous data");

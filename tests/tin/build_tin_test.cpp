@@ -28,7 +28,9 @@ struct TopologyReport {
 };
 
 // Checks that `mesh` is a valid manifold triangulation of the full raster rectangle.
-TopologyReport checkTopology(const TinMesh& mesh, int width, int height) {
+// block_pixels: edges lying on a window border of a windowed build are constrained and
+// exempt from the Delaunay check (0: none are).
+TopologyReport checkTopology(const TinMesh& mesh, int width, int height, int block_pixels) {
   TopologyReport report;
   struct Edge {
     std::uint64_t key;     // min << 32 | max
@@ -87,7 +89,12 @@ TopologyReport checkTopology(const TinMesh& mesh, int width, int height) {
                     I{A[2]} * (I{B[0]} * C[1] - I{B[1]} * C[0]);
       const std::int64_t orientation = std::int64_t(q.col - p.col) * std::int64_t(l.row - p.row) -
                                        std::int64_t(q.row - p.row) * std::int64_t(l.col - p.col);
-      if ((orientation > 0 && det > 0) || (orientation < 0 && det < 0)) ++report.non_delaunay_edges;
+      const bool on_window_border =
+          block_pixels > 0 && ((p.col == q.col && int(p.col) % block_pixels == 0) ||
+                               (p.row == q.row && int(p.row) % block_pixels == 0));
+      if (!on_window_border && ((orientation > 0 && det > 0) || (orientation < 0 && det < 0))) {
+        ++report.non_delaunay_edges;
+      }
     } else {
       ++report.non_manifold_edges;
     }
@@ -135,12 +142,14 @@ std::size_t uncoveredAwayFromNodata(const DemGrid& dem, const TinMesh& mesh) {
   return away;
 }
 
-void checkTin(const DemGrid& dem, double max_error_m) {
+void checkTin(const DemGrid& dem, double max_error_m, int block_pixels = TinOptions{}.block_pixels) {
   CAPTURE(max_error_m);
+  CAPTURE(block_pixels);
   const bool has_nodata = computeStatistics(dem).valid_pixels < dem.pixelCount();
   Progress progress;
   TinOptions options;
   options.max_error_m = max_error_m;
+  options.block_pixels = block_pixels;
   const TinMesh mesh = buildTin(dem, options, progress);
   // Every pixel of the raster, not a sample.
   const TinErrorStatistics errors = measureTin(dem, mesh);
@@ -156,7 +165,7 @@ void checkTin(const DemGrid& dem, double max_error_m) {
     CHECK(errors.uncovered_valid_pixels == 0);
     CHECK(errors.measured_pixels == dem.pixelCount());
   }
-  const TopologyReport topology = checkTopology(mesh, dem.width, dem.height);
+  const TopologyReport topology = checkTopology(mesh, dem.width, dem.height, block_pixels);
   CHECK(topology.non_manifold_edges == 0);
   CHECK(topology.inconsistent_edges == 0);
   CHECK(topology.clockwise_triangles == 0);
@@ -182,24 +191,48 @@ TEST_SUITE("tin") {
   TEST_CASE("a plane needs only the two corner triangles") {
     const DemGrid plane = test::makeDem(50, 30, 1.0, [](int c, int r) { return 100.0 + 0.5 * c - 0.25 * r; });
     Progress progress;
-    const TinMesh mesh = buildTin(plane, TinOptions{0.01}, progress);
+    const TinMesh mesh = buildTin(plane, TinOptions{0.01, 0}, progress);
     CHECK(mesh.vertices.size() == 4);
     CHECK(mesh.triangleCount() == 2);
-    checkTin(plane, 0.01);
+    checkTin(plane, 0.01, 0);
   }
 
   TEST_CASE("a cone is refined until every pixel is within the bound") {
     const DemGrid cone = test::makeDem(61, 47, 1.0, [](int c, int r) {
       return 500.0 - 3.0 * std::hypot(c - 30.3, r - 20.7);
     });
-    for (double e : {5.0, 1.0, 0.1}) checkTin(cone, e);
+    for (double e : {5.0, 1.0, 0.1}) checkTin(cone, e, 0);
+  }
+
+  TEST_CASE("small windows stitch into one seamless TIN with and without nodata") {
+    const DemGrid cone = test::makeDem(97, 70, 1.0, [](int c, int r) {
+      return 500.0 - 3.0 * std::hypot(c - 40.3, r - 30.7);
+    });
+    const DemGrid holes = test::makeDem(97, 70, 1.0, [](int c, int r) {
+      if (std::hypot(c - 32.0, r - 32.0) < 7.5 || c + r < 9) return std::nan("");
+      return 500.0 - 3.0 * std::hypot(c - 40.3, r - 30.7);
+    });
+    for (int block : {8, 16, 32}) {
+      checkTin(cone, 1.0, block);
+      checkTin(holes, 1.0, block);
+    }
+  }
+
+  TEST_CASE("the windowed and the single triangulation make about as many triangles") {
+    const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
+    Progress progress;
+    TinOptions single{10.0, 0}, windowed{10.0, 256};
+    const double ratio = static_cast<double>(buildTin(dem, windowed, progress).triangleCount()) /
+                         static_cast<double>(buildTin(dem, single, progress).triangleCount());
+    MESSAGE("windowed / single triangles: " << ratio);
+    CHECK(ratio < 1.02);
   }
 
   TEST_CASE("tighter bounds give more triangles") {
     const DemGrid dem = readDem({test::sharedData("ch_dhm25_interlaken_25m_2056.tif")});
     Progress progress;
-    const std::size_t coarse = buildTin(dem, TinOptions{2.0}, progress).triangleCount();
-    const std::size_t fine = buildTin(dem, TinOptions{0.5}, progress).triangleCount();
+    const std::size_t coarse = buildTin(dem, TinOptions{2.0, 0}, progress).triangleCount();
+    const std::size_t fine = buildTin(dem, TinOptions{0.5, 0}, progress).triangleCount();
     CHECK(fine > coarse);
   }
 
@@ -219,7 +252,7 @@ TEST_SUITE("tin") {
       if (c > 70 + (r * 7) % 5) return std::nan("");
       return 400.0 - 2.0 * std::hypot(c - 30.3, r - 25.7);
     });
-    for (double e : {2.0, 0.5, 0.1}) checkTin(dem, e);
+    for (double e : {2.0, 0.5, 0.1}) checkTin(dem, e, 0);
   }
 }
 
@@ -234,6 +267,27 @@ TEST_SUITE("tin-real") {
                                  test::sharedData("nl_ahn3_delft_tiles/delft_east_0.5m_28992.tif")});
     for (double e : {0.5, 1.0, 2.0}) checkTin(dem, e);
   }
+  TEST_CASE("the two Delft files give one TIN with no seam along their common border") {
+    // West tile: columns 0-382 of the mosaic; east tile: 383-526. No TIN edge may be a
+    // boundary edge along that line, and triangles must span it.
+    const DemGrid dem = readDem({test::sharedData("nl_ahn3_delft_tiles/delft_west_0.5m_28992.tif"),
+                                 test::sharedData("nl_ahn3_delft_tiles/delft_east_0.5m_28992.tif")});
+    Progress progress;
+    const TinMesh mesh = buildTin(dem, TinOptions{0.5}, progress);
+    const TopologyReport topology = checkTopology(mesh, dem.width, dem.height, TinOptions{}.block_pixels);
+    CHECK(topology.boundary_off_border == 0);
+    std::size_t spanning = 0;
+    for (std::size_t t = 0; t < mesh.triangle_indices.size(); t += 3) {
+      double lo = 1e9, hi = -1e9;
+      for (int k = 0; k < 3; ++k) {
+        lo = std::min(lo, mesh.vertices[mesh.triangle_indices[t + k]].col);
+        hi = std::max(hi, mesh.vertices[mesh.triangle_indices[t + k]].col);
+      }
+      if (lo <= 382 && hi >= 383) ++spanning;
+    }
+    CHECK(spanning > 0);
+  }
+
   TEST_CASE("the Minnesota lidar TIN holds 0.5 1 and 2 m on every pixel") {
     const DemGrid dem = readDem({test::sharedData("us_mn_lidar_dtm_1m_26915.tif")});
     for (double e : {0.5, 1.0, 2.0}) checkTin(dem, e);
