@@ -668,7 +668,7 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
   progress.beginStage("TIN (greedy insertion, windowed)", nx * ny);
   std::vector<TinMesh> blocks(nx * ny);
   std::size_t next_block = 0;
-  constexpr std::size_t kBatch = 16;  // report progress and check Ctrl-C between batches
+  constexpr std::size_t kBatch = 64;  // report progress and check Ctrl-C between batches
   while (next_block < blocks.size()) {
     const std::size_t end = std::min(blocks.size(), next_block + kBatch);
     tbb::parallel_for(next_block, end, [&](std::size_t b) {
@@ -686,15 +686,31 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
   }
   progress.endStage();
 
-  // Stitch: vertices on shared borders have the same pixel position in both windows.
+  // Stitch: vertices on shared borders have the same pixel position in both windows; only
+  // those (on a window's outline) need looking up, every other vertex is new.
   TinMesh mesh;
-  std::unordered_map<std::uint64_t, std::uint32_t> index_of;
+  std::size_t total_vertices = 0, total_indices = 0;
   for (const TinMesh& block : blocks) {
+    total_vertices += block.vertices.size();
+    total_indices += block.triangle_indices.size();
+  }
+  mesh.vertices.reserve(total_vertices);
+  mesh.triangle_indices.reserve(total_indices);
+  std::unordered_map<std::uint64_t, std::uint32_t> outline_index;
+  for (std::size_t b = 0; b < blocks.size(); ++b) {
+    const TinMesh& block = blocks[b];
+    const std::size_t i = b % nx, j = b / nx;
     std::vector<std::uint32_t> remap(block.vertices.size());
     for (std::size_t v = 0; v < block.vertices.size(); ++v) {
       const GridPoint& p = block.vertices[v];
+      const bool on_outline = p.col == xs[i] || p.col == xs[i + 1] || p.row == ys[j] || p.row == ys[j + 1];
+      if (!on_outline) {
+        remap[v] = static_cast<std::uint32_t>(mesh.vertices.size());
+        mesh.vertices.push_back(p);
+        continue;
+      }
       const std::uint64_t key = (static_cast<std::uint64_t>(p.row) << 32) | static_cast<std::uint32_t>(p.col);
-      const auto [it, inserted] = index_of.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
+      const auto [it, inserted] = outline_index.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
       if (inserted) mesh.vertices.push_back(p);
       remap[v] = it->second;
     }
