@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdio>
+#include <fstream>
 #include <sstream>
 
 #include "tools/terratiles/run_cli.h"
@@ -17,6 +18,22 @@ std::string sharedData(const std::string& relative) {
 }
 
 std::string sourceDir() { return TERRATILES_SOURCE_DIR; }
+
+std::vector<std::vector<double>> lv95ReferenceRows() {
+  std::ifstream in(sharedData("reference/lv95_reference_points.csv"));
+  std::vector<std::vector<double>> rows;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line.rfind("name,", 0) == 0) continue;
+    std::stringstream fields(line);
+    std::string field;
+    std::getline(fields, field, ',');  // the point's name
+    std::vector<double> row;
+    while (std::getline(fields, field, ',')) row.push_back(std::stod(field));
+    rows.push_back(row);
+  }
+  return rows;
+}
 
 TempDir::TempDir() {
   std::string pattern = (std::filesystem::temp_directory_path() / "terratiles-test-XXXXXX").string();

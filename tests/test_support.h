@@ -15,6 +15,12 @@ namespace terratiles::test {
 std::string sharedData(const std::string& relative);
 std::string sourceDir();
 
+// ../shared/data/reference/lv95_reference_points.csv (PROJ 9.1.1), one row per point: the
+// numeric columns after the name, 0 E, 1 N, 2 H_LN02, 3 lon, 4 lat, 5 merc_x, 6 merc_y,
+// 7-9 ECEF without geoid, 10 N_chgeo2004, 11 h_wgs84_geoid, 12-14 ECEF with geoid,
+// 15 N_egm96, 16 h_besselH.
+std::vector<std::vector<double>> lv95ReferenceRows();
+
 class TempDir {
  public:
   TempDir();

@@ -10,52 +10,27 @@
 
 using namespace terratiles;
 
-namespace {
-struct ReferencePoint {
-  std::string name;
-  double e, n, h, lon, lat, ecef_x, ecef_y, ecef_z;
-};
-
-// ../shared/data/reference/lv95_reference_points.csv: PROJ 9.1.1 results for 16 points.
-std::vector<ReferencePoint> readReferencePoints() {
-  std::ifstream in(test::sharedData("reference/lv95_reference_points.csv"));
-  std::vector<ReferencePoint> points;
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#' || line.rfind("name,", 0) == 0) continue;
-    std::stringstream fields(line);
-    std::vector<std::string> f;
-    std::string field;
-    while (std::getline(fields, field, ',')) f.push_back(field);
-    REQUIRE(f.size() >= 11);
-    points.push_back({f[0], std::stod(f[1]), std::stod(f[2]), std::stod(f[3]), std::stod(f[4]),
-                      std::stod(f[5]), std::stod(f[8]), std::stod(f[9]), std::stod(f[10])});
-  }
-  return points;
-}
-}  // namespace
 
 TEST_SUITE("geo") {
   TEST_CASE("EPSG 2056 goes to WGS84 and ECEF as PROJ computes the reference points") {
-    const std::vector<ReferencePoint> points = readReferencePoints();
+    const auto points = test::lv95ReferenceRows();
     REQUIRE(points.size() == 16);
     const CrsToWgs84 to_wgs84("EPSG:2056");
     std::vector<CrsPoint> in;
-    for (const auto& p : points) in.push_back({p.e, p.n});
+    for (const auto& p : points) in.push_back({p[0], p[1]});
     std::vector<GeodeticPoint> geodetic(in.size());
-    for (std::size_t i = 0; i < points.size(); ++i) geodetic[i].height_m = points[i].h;
+    for (std::size_t i = 0; i < points.size(); ++i) geodetic[i].height_m = points[i][2];
     to_wgs84.transform(in, geodetic);
-    for (std::size_t i = 0; i < points.size(); ++i) CHECK(geodetic[i].height_m == points[i].h);
+    for (std::size_t i = 0; i < points.size(); ++i) CHECK(geodetic[i].height_m == points[i][2]);
     std::vector<EcefPoint> ecef(in.size());
     geodeticToEcef(geodetic, ecef);
     double worst_deg = 0, worst_m = 0;
     for (std::size_t i = 0; i < points.size(); ++i) {
-      CAPTURE(points[i].name);
-      worst_deg = std::max({worst_deg, std::fabs(geodetic[i].lon_deg - points[i].lon),
-                            std::fabs(geodetic[i].lat_deg - points[i].lat)});
-      worst_m = std::max({worst_m, std::fabs(ecef[i].x - points[i].ecef_x),
-                          std::fabs(ecef[i].y - points[i].ecef_y),
-                          std::fabs(ecef[i].z - points[i].ecef_z)});
+      CAPTURE(i);
+      worst_deg = std::max({worst_deg, std::fabs(geodetic[i].lon_deg - points[i][3]),
+                            std::fabs(geodetic[i].lat_deg - points[i][4])});
+      worst_m = std::max({worst_m, std::fabs(ecef[i].x - points[i][7]),
+                          std::fabs(ecef[i].y - points[i][8]), std::fabs(ecef[i].z - points[i][9])});
     }
     MESSAGE("worst lon/lat difference " << worst_deg << " deg, ECEF " << worst_m << " m");
     CHECK(worst_deg < 1e-9);   // the CSV prints 1e-10 deg
@@ -102,25 +77,16 @@ TEST_SUITE("geo") {
 
 TEST_SUITE("geo") {
   TEST_CASE("EGM96 and CHGeo2004 undulations match PROJ at the reference points") {
-    // Columns 11 (N_chgeo2004_LN02) and 16 (N_egm96) of the reference CSV.
-    std::ifstream in(test::sharedData("reference/lv95_reference_points.csv"));
-    const CrsToWgs84 to_wgs84("EPSG:2056");
     const GeoidGrid egm96 = readGeoidGrid(kDefaultGeoidPath);
     const GeoidGrid chgeo = readGeoidGrid(test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif"));
     CHECK(egm96.wraps_longitude);
     CHECK_FALSE(chgeo.wraps_longitude);
-    std::string line;
     int points = 0;
     double worst_egm96 = 0, worst_chgeo = 0;
-    while (std::getline(in, line)) {
-      if (line.empty() || line[0] == '#' || line.rfind("name,", 0) == 0) continue;
-      std::stringstream fields(line);
-      std::vector<std::string> f;
-      std::string field;
-      while (std::getline(fields, field, ',')) f.push_back(field);
-      const double lon = std::stod(f[4]), lat = std::stod(f[5]);
-      worst_egm96 = std::max(worst_egm96, std::fabs(egm96.undulationAt(lon, lat).value() - std::stod(f[16])));
-      worst_chgeo = std::max(worst_chgeo, std::fabs(chgeo.undulationAt(lon, lat).value() - std::stod(f[11])));
+    for (const auto& row : test::lv95ReferenceRows()) {
+      const double lon = row[3], lat = row[4];
+      worst_egm96 = std::max(worst_egm96, std::fabs(egm96.undulationAt(lon, lat).value() - row[15]));
+      worst_chgeo = std::max(worst_chgeo, std::fabs(chgeo.undulationAt(lon, lat).value() - row[10]));
       ++points;
     }
     CHECK(points == 16);

@@ -14,22 +14,12 @@ using terratiles::test::sharedData;
 namespace {
 
 struct Row {
-  std::vector<double> v;  // the CSV's numeric columns 1..17 (E N H lon lat merc_x merc_y ...)
+  std::vector<double> v;  // test::lv95ReferenceRows()'s columns
 };
 
 std::vector<Row> referenceRows() {
-  std::ifstream in(sharedData("reference/lv95_reference_points.csv"));
   std::vector<Row> rows;
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#' || line.rfind("name,", 0) == 0) continue;
-    std::stringstream fields(line);
-    std::string field;
-    std::getline(fields, field, ',');  // name
-    Row row;
-    while (std::getline(fields, field, ',')) row.v.push_back(std::stod(field));
-    rows.push_back(row);
-  }
+  for (auto& values : terratiles::test::lv95ReferenceRows()) rows.push_back({std::move(values)});
   return rows;
 }
 
