@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string_view>
@@ -893,12 +894,21 @@ const char* const kFrameComment =
     "terratiles TIN: x east y north (CRS units) z height (m); triangles counter-clockwise "
     "seen from above";
 
+// What the writers need of a TIN: its CRS positions one by one, so a TinMesh is written
+// without a second copy in memory.
+struct TinView {
+  std::size_t vertex_count = 0;
+  std::function<std::array<double, 3>(std::size_t)> position;
+  const std::vector<std::uint32_t>& triangle_indices;
+};
+
 // The text formats share their body: vertex lines "<prefix>x y z", then face lines
 // "<face_tag> a b c" with indices counted from index_base.
-void appendTextMesh(const CrsTin& tin, AtomicFile& file, const char* vertex_prefix,
+void appendTextMesh(const TinView& tin, AtomicFile& file, const char* vertex_prefix,
                     char face_tag, std::uint64_t index_base) {
   std::string& out = file.buffer();
-  for (const std::array<double, 3>& p : tin.positions) {
+  for (std::size_t v = 0; v < tin.vertex_count; ++v) {
+    const std::array<double, 3> p = tin.position(v);
     out += vertex_prefix;
     appendNumber(out, p[0]);
     out += ' ';
@@ -919,17 +929,17 @@ void appendTextMesh(const CrsTin& tin, AtomicFile& file, const char* vertex_pref
   }
 }
 
-void writeOff(const CrsTin& tin, AtomicFile& file) {
+void writeOff(const TinView& tin, AtomicFile& file) {
   std::string& out = file.buffer();
   out += "OFF\n";
-  appendNumber(out, std::uint64_t{tin.positions.size()});
+  appendNumber(out, std::uint64_t{tin.vertex_count});
   out += ' ';
-  appendNumber(out, std::uint64_t{tin.triangleCount()});
+  appendNumber(out, std::uint64_t{tin.triangle_indices.size() / 3});
   out += " 0\n";
   appendTextMesh(tin, file, "", '3', 0);
 }
 
-void writeObj(const CrsTin& tin, AtomicFile& file) {
+void writeObj(const TinView& tin, AtomicFile& file) {
   std::string& out = file.buffer();
   out += "# ";
   out += kFrameComment;
@@ -937,16 +947,17 @@ void writeObj(const CrsTin& tin, AtomicFile& file) {
   appendTextMesh(tin, file, "v ", 'f', 1);  // OBJ indices are 1-based
 }
 
-void writePly(const CrsTin& tin, AtomicFile& file) {
+void writePly(const TinView& tin, AtomicFile& file) {
   std::string& out = file.buffer();
   out += "ply\nformat binary_little_endian 1.0\ncomment ";
   out += kFrameComment;
   out += "\nelement vertex ";
-  appendNumber(out, std::uint64_t{tin.positions.size()});
+  appendNumber(out, std::uint64_t{tin.vertex_count});
   out += "\nproperty double x\nproperty double y\nproperty double z\nelement face ";
-  appendNumber(out, std::uint64_t{tin.triangleCount()});
+  appendNumber(out, std::uint64_t{tin.triangle_indices.size() / 3});
   out += "\nproperty list uchar uint vertex_indices\nend_header\n";
-  for (const std::array<double, 3>& p : tin.positions) {
+  for (std::size_t v = 0; v < tin.vertex_count; ++v) {
+    const std::array<double, 3> p = tin.position(v);
     appendLittleEndian(out, p[0]);
     appendLittleEndian(out, p[1]);
     appendLittleEndian(out, p[2]);
@@ -966,6 +977,25 @@ std::string lowercase(std::string text) {
   return text;
 }
 
+void writeTinView(const TinView& tin, const std::string& path) {
+  TERRATILES_ASSERT(tin.triangle_indices.size() % 3 == 0);
+  for (const std::uint32_t index : tin.triangle_indices) {
+    TERRATILES_ASSERT(index < tin.vertex_count);
+  }
+  for (std::size_t v = 0; v < tin.vertex_count; ++v) {
+    const std::array<double, 3> p = tin.position(v);
+    TERRATILES_ASSERT(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]));
+  }
+  const TinFileFormat format = tinFileFormatFor(path);
+  AtomicFile file(path);
+  switch (format) {
+    case TinFileFormat::Off: writeOff(tin, file); break;
+    case TinFileFormat::Obj: writeObj(tin, file); break;
+    case TinFileFormat::Ply: writePly(tin, file); break;
+  }
+  file.commit();
+}
+
 }  // namespace
 
 TinFileFormat tinFileFormatFor(const std::string& path) {
@@ -980,21 +1010,21 @@ TinFileFormat tinFileFormatFor(const std::string& path) {
 }
 
 void writeTinFile(const CrsTin& tin, const std::string& path) {
-  TERRATILES_ASSERT(tin.triangle_indices.size() % 3 == 0);
-  for (const std::uint32_t index : tin.triangle_indices) {
-    TERRATILES_ASSERT(index < tin.positions.size());
-  }
-  for (const std::array<double, 3>& p : tin.positions) {
-    TERRATILES_ASSERT(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]));
-  }
-  const TinFileFormat format = tinFileFormatFor(path);
-  AtomicFile file(path);
-  switch (format) {
-    case TinFileFormat::Off: writeOff(tin, file); break;
-    case TinFileFormat::Obj: writeObj(tin, file); break;
-    case TinFileFormat::Ply: writePly(tin, file); break;
-  }
-  file.commit();
+  writeTinView({tin.positions.size(), [&](std::size_t v) { return tin.positions[v]; }, tin.triangle_indices},
+               path);
+}
+
+void writeTinFile(const TinMesh& mesh, double origin_x, double origin_y, double pixel_size,
+                  const std::string& path) {
+  TERRATILES_ASSERT(pixel_size > 0);
+  writeTinView({mesh.vertices.size(),
+                [&](std::size_t v) {
+                  const GridPoint& p = mesh.vertices[v];
+                  return std::array<double, 3>{origin_x + (p.col + 0.5) * pixel_size,
+                                               origin_y - (p.row + 0.5) * pixel_size, p.height_m};
+                },
+                mesh.triangle_indices},
+               path);
 }
 
 CrsTin readTinFile(const std::string& path) {

@@ -57,6 +57,10 @@ TinFileFormat tinFileFormatFor(const std::string& path);
 // (asserted): whole triangles and every index below positions.size(). Throws Error(Usage)
 // for an unknown extension and Error(Output) when the file cannot be written.
 void writeTinFile(const CrsTin& tin, const std::string& path);
+// The same for a grid-frame TinMesh with the georeference of toCrsTin (below), converting
+// vertex by vertex: writes the file toCrsTin's result would give, without that copy.
+void writeTinFile(const TinMesh& mesh, double origin_x, double origin_y, double pixel_size,
+                  const std::string& path);
 
 // Reads a TIN from `path` in the format of its extension. Guarantees on return: at least one
 // triangle, every index below positions.size(), every coordinate finite. Throws Error(Usage)

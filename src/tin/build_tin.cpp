@@ -124,6 +124,17 @@ struct Window {
   std::int32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
 };
 
+// A window's triangles in compact form (8 bytes per vertex: heights are the DEM's), kept
+// until the stitch; TinMesh's GridPoint takes 24.
+struct WindowMesh {
+  std::vector<Pixel> pixels;
+  std::vector<std::uint32_t> triangle_indices;  // counter-clockwise seen from above
+};
+
+GridPoint gridPoint(const DemGrid& dem, Pixel p) {
+  return {static_cast<double>(p.x), static_cast<double>(p.y), static_cast<double>(dem.heightAt(p.x, p.y))};
+}
+
 // What every window of one DEM shares.
 struct DemFacts {
   bool has_nodata = false;
@@ -195,8 +206,8 @@ class GreedyInsertion {
 
   // The triangulation without the triangles over nodata or at a virtual corner, and
   // without the vertices only those used.
-  TinMesh mesh() const {
-    TinMesh out;
+  WindowMesh mesh() const {
+    WindowMesh out;
     constexpr std::uint32_t kUnused = std::numeric_limits<std::uint32_t>::max();
     std::vector<std::uint32_t> output_index(coords_.size(), kUnused);
     out.triangle_indices.reserve(triangles_.size());
@@ -207,14 +218,14 @@ class GreedyInsertion {
       for (const std::size_t k : {e, e + 2, e + 1}) {
         const auto v = static_cast<std::size_t>(triangles_[k]);
         if (output_index[v] == kUnused) {
-          output_index[v] = static_cast<std::uint32_t>(out.vertices.size());
-          const Pixel p = coords_[v];
-          out.vertices.push_back({static_cast<double>(p.x), static_cast<double>(p.y),
-                                  static_cast<double>(dem_.heightAt(p.x, p.y))});
+          output_index[v] = static_cast<std::uint32_t>(out.pixels.size());
+          out.pixels.push_back(coords_[v]);
         }
         out.triangle_indices.push_back(output_index[v]);
       }
     }
+    out.pixels.shrink_to_fit();
+    out.triangle_indices.shrink_to_fit();
     return out;
   }
 
@@ -638,7 +649,11 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
     GreedyInsertion insertion(dem, options.max_error_m, {0, 0, dem.width - 1, dem.height - 1}, facts);
     insertion.run(&progress);
     progress.endStage();
-    TinMesh mesh = insertion.mesh();
+    WindowMesh window_mesh = insertion.mesh();
+    TinMesh mesh;
+    mesh.vertices.reserve(window_mesh.pixels.size());
+    for (const Pixel& p : window_mesh.pixels) mesh.vertices.push_back(gridPoint(dem, p));
+    mesh.triangle_indices = std::move(window_mesh.triangle_indices);
     if (mesh.triangleCount() == 0) {
       throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
                                     "valid pixels; expected a DEM with some contiguous data");
@@ -665,13 +680,21 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
       horizontal[j][i] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i + 1], ys[j]}, options.max_error_m);
     }
   }
+  // Every batch of windows is built in parallel, then stitched into the mesh and released,
+  // so memory holds the DEM, the mesh and one batch. Stitch: vertices on shared borders have
+  // the same pixel position in both windows; only those (on a window's outline) need looking
+  // up, every other vertex is new.
   progress.beginStage("TIN (greedy insertion, windowed)", nx * ny);
-  std::vector<TinMesh> blocks(nx * ny);
-  std::size_t next_block = 0;
+  const std::size_t window_count = nx * ny;
+  std::vector<WindowMesh> batch;
+  TinMesh mesh;
+  std::unordered_map<std::uint64_t, std::uint32_t> outline_index;
+  std::vector<std::uint32_t> remap;
   constexpr std::size_t kBatch = 64;  // report progress and check Ctrl-C between batches
-  while (next_block < blocks.size()) {
-    const std::size_t end = std::min(blocks.size(), next_block + kBatch);
-    tbb::parallel_for(next_block, end, [&](std::size_t b) {
+  for (std::size_t first = 0; first < window_count; first += kBatch) {
+    const std::size_t end = std::min(window_count, first + kBatch);
+    batch.assign(end - first, WindowMesh{});
+    tbb::parallel_for(first, end, [&](std::size_t b) {
       const std::size_t i = b % nx, j = b / nx;
       std::vector<Pixel> border;
       for (const auto* run : {&horizontal[j][i], &horizontal[j + 1][i], &vertical[i][j], &vertical[i + 1][j]}) {
@@ -679,43 +702,48 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
       }
       GreedyInsertion insertion(dem, options.max_error_m, {xs[i], ys[j], xs[i + 1], ys[j + 1]}, facts);
       insertion.run(nullptr, &border);
-      blocks[b] = insertion.mesh();
+      batch[b - first] = insertion.mesh();
     });
-    progress.advance(end - next_block);
-    next_block = end;
+    // Grow the mesh once per batch to the size projected from the windows done so far (plus
+    // 10 %), instead of doubling: a doubling of the final arrays would need 3x their size.
+    std::size_t batch_vertices = 0, batch_indices = 0;
+    for (const WindowMesh& window : batch) {
+      batch_vertices += window.pixels.size();
+      batch_indices += window.triangle_indices.size();
+    }
+    const double projection = 1.1 * static_cast<double>(window_count) / static_cast<double>(end);
+    const auto projected = [&](std::size_t size) {
+      return std::max(size, static_cast<std::size_t>(static_cast<double>(size) * projection));
+    };
+    if (mesh.vertices.size() + batch_vertices > mesh.vertices.capacity()) {
+      mesh.vertices.reserve(projected(mesh.vertices.size() + batch_vertices));
+    }
+    if (mesh.triangle_indices.size() + batch_indices > mesh.triangle_indices.capacity()) {
+      mesh.triangle_indices.reserve(projected(mesh.triangle_indices.size() + batch_indices));
+    }
+    for (std::size_t b = first; b < end; ++b) {
+      WindowMesh& window = batch[b - first];
+      const std::size_t i = b % nx, j = b / nx;
+      remap.resize(window.pixels.size());
+      for (std::size_t v = 0; v < window.pixels.size(); ++v) {
+        const Pixel p = window.pixels[v];
+        const bool on_outline = p.x == xs[i] || p.x == xs[i + 1] || p.y == ys[j] || p.y == ys[j + 1];
+        if (!on_outline) {
+          remap[v] = static_cast<std::uint32_t>(mesh.vertices.size());
+          mesh.vertices.push_back(gridPoint(dem, p));
+          continue;
+        }
+        const std::uint64_t key = (static_cast<std::uint64_t>(p.y) << 32) | static_cast<std::uint32_t>(p.x);
+        const auto [it, inserted] = outline_index.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
+        if (inserted) mesh.vertices.push_back(gridPoint(dem, p));
+        remap[v] = it->second;
+      }
+      for (const std::uint32_t v : window.triangle_indices) mesh.triangle_indices.push_back(remap[v]);
+      window = WindowMesh{};
+    }
+    progress.advance(end - first);
   }
   progress.endStage();
-
-  // Stitch: vertices on shared borders have the same pixel position in both windows; only
-  // those (on a window's outline) need looking up, every other vertex is new.
-  TinMesh mesh;
-  std::size_t total_vertices = 0, total_indices = 0;
-  for (const TinMesh& block : blocks) {
-    total_vertices += block.vertices.size();
-    total_indices += block.triangle_indices.size();
-  }
-  mesh.vertices.reserve(total_vertices);
-  mesh.triangle_indices.reserve(total_indices);
-  std::unordered_map<std::uint64_t, std::uint32_t> outline_index;
-  for (std::size_t b = 0; b < blocks.size(); ++b) {
-    const TinMesh& block = blocks[b];
-    const std::size_t i = b % nx, j = b / nx;
-    std::vector<std::uint32_t> remap(block.vertices.size());
-    for (std::size_t v = 0; v < block.vertices.size(); ++v) {
-      const GridPoint& p = block.vertices[v];
-      const bool on_outline = p.col == xs[i] || p.col == xs[i + 1] || p.row == ys[j] || p.row == ys[j + 1];
-      if (!on_outline) {
-        remap[v] = static_cast<std::uint32_t>(mesh.vertices.size());
-        mesh.vertices.push_back(p);
-        continue;
-      }
-      const std::uint64_t key = (static_cast<std::uint64_t>(p.row) << 32) | static_cast<std::uint32_t>(p.col);
-      const auto [it, inserted] = outline_index.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
-      if (inserted) mesh.vertices.push_back(p);
-      remap[v] = it->second;
-    }
-    for (const std::uint32_t v : block.triangle_indices) mesh.triangle_indices.push_back(remap[v]);
-  }
   if (mesh.triangleCount() == 0) {
     throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
                                   "valid pixels; expected a DEM with some contiguous data");

@@ -172,23 +172,25 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
     throw Error(ErrorCode::Output, options.output + ": file exists; use --force to replace it");
   }
   progress.beginStage("reading DEM", 0);
-  const DemGrid dem = readDem(options.inputs);
+  DemGrid dem = readDem(options.inputs);
   progress.endStage();
   TinOptions tin_options;
   tin_options.max_error_m = options.max_error_m;
-  const TinMesh mesh = buildTin(dem, tin_options, progress);
+  TinMesh mesh = buildTin(dem, tin_options, progress);
   progress.beginStage("checking every pixel", 0);
   const TinErrorStatistics errors = measureTin(dem, mesh);
   progress.endStage();
-  writeTinFile(toCrsTin(mesh, dem.origin_x, dem.origin_y, dem.pixel_size_x), options.output);
+  const std::size_t vertex_count = mesh.vertices.size(), triangle_count = mesh.triangleCount();
+  dem.heights_m = {};  // not needed any more
+  writeTinFile(mesh, dem.origin_x, dem.origin_y, dem.pixel_size_x, options.output);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!quiet) {
     char line[512];
     std::snprintf(line, sizeof line,
                   "terratiles: wrote %s (%s): %zu vertices, %zu triangles; measured on %zu pixels: "
                   "max error %.4f m (bound %.4g m), rms %.4f m; %.2f s\n",
-                  options.output.c_str(), dem.crs_name.c_str(), mesh.vertices.size(),
-                  mesh.triangleCount(), errors.measured_pixels, errors.max_error_m,
+                  options.output.c_str(), dem.crs_name.c_str(), vertex_count,
+                  triangle_count, errors.measured_pixels, errors.max_error_m,
                   options.max_error_m, errors.rms_error_m, seconds);
     err << line << std::flush;
   }
