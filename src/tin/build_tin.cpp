@@ -87,6 +87,8 @@ inline double rowMaxError(const float* row, std::int64_t x0, std::int64_t x1, do
 __extension__ typedef __int128 Int128;
 
 constexpr std::int32_t kNone = -1;
+// Triangles narrower than this many pixels are scanned over their bounding box.
+constexpr std::int32_t kNarrowTriangle = 16;
 
 inline std::int32_t nextHalfedge(std::int32_t e) { return e % 3 == 2 ? e - 2 : e + 1; }
 inline std::int32_t prevHalfedge(std::int32_t e) { return e % 3 == 0 ? e + 2 : e - 1; }
@@ -423,19 +425,66 @@ class GreedyInsertion {
       beta_at_0[k] = -beta_step[k] * from[k].y + std::int64_t{to[k].y - from[k].y} * from[k].x;
       inverse_alpha[k] = alpha[k] != 0 ? 1.0 / static_cast<double>(alpha[k]) : 0.0;
     }
-    for (std::int32_t y = min_y; y <= max_y; ++y) {
+    if (max_x - min_x < kNarrowTriangle) {
+      // Narrow: walk the bounding box with incremental edge functions; computing each row's
+      // span would cost more than its few pixels. Same pixels, same order, same errors.
+      std::int32_t x_first = min_x, x_last = max_x, y_first = min_y, y_last = max_y;
+      if (border_fixed_) {  // as below: the fixed outline's pixels are never candidates
+        x_first = std::max(x_first, window_.x0 + 1);
+        x_last = std::min(x_last, window_.x1 - 1);
+        y_first = std::max(y_first, window_.y0 + 1);
+        y_last = std::min(y_last, window_.y1 - 1);
+      }
+      std::int64_t w_row[3];
+      for (int k = 0; k < 3; ++k) w_row[k] = alpha[k] * x_first + beta_step[k] * y_first + beta_at_0[k];
+      for (std::int32_t y = y_first; y <= y_last; ++y) {
+        const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
+        const double row_z = gy * y + z0;
+        std::int64_t w0 = w_row[0], w1 = w_row[1], w2 = w_row[2];
+        if (!has_nodata_) {
+          // Branch-free: a pixel outside (some edge function negative) scores -1.
+          for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
+            const double error = std::fabs(gx * static_cast<double>(x) + row_z - row[x]);
+            const double scored = (w0 | w1 | w2) < 0 ? -1.0 : error;
+            const bool wins = scored > best_error;
+            best_error = wins ? scored : best_error;
+            best.x = wins ? x : best.x;
+            best.y = wins ? y : best.y;
+          }
+        } else {
+          for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
+            if ((w0 | w1 | w2) < 0) continue;  // outside: some edge function is negative
+            const float h = row[x];
+            if (std::isnan(h)) {
+              covers_nodata = true;
+              continue;
+            }
+            if ((x == a.x && y == a.y) || (x == b.x && y == b.y) || (x == c.x && y == c.y)) continue;
+            const double error = std::fabs(gx * static_cast<double>(x) + row_z - h);
+            if (error > best_error) {
+              best_error = error;
+              best = {x, y};
+            }
+          }
+        }
+        for (int k = 0; k < 3; ++k) w_row[k] += beta_step[k];
+      }
+    }
+    for (std::int32_t y = min_y; y <= max_y && max_x - min_x >= kNarrowTriangle; ++y) {
       std::int64_t x0 = min_x, x1 = max_x;
       bool empty = false;
       for (int k = 0; k < 3; ++k) {
         const std::int64_t beta = beta_at_0[k] + beta_step[k] * y;
         // Inside: alpha * x + beta >= 0.
         if (alpha[k] > 0) {
-          std::int64_t bound = static_cast<std::int64_t>(std::ceil(static_cast<double>(-beta) * inverse_alpha[k]));
+          // Truncation, not std::ceil (a library call without SSE4.1): the loops below make
+          // it exact either way.
+          std::int64_t bound = static_cast<std::int64_t>(static_cast<double>(-beta) * inverse_alpha[k]);
           while (alpha[k] * bound + beta < 0) ++bound;
           while (alpha[k] * (bound - 1) + beta >= 0) --bound;
           x0 = std::max(x0, bound);
         } else if (alpha[k] < 0) {
-          std::int64_t bound = static_cast<std::int64_t>(std::floor(static_cast<double>(-beta) * inverse_alpha[k]));
+          std::int64_t bound = static_cast<std::int64_t>(static_cast<double>(-beta) * inverse_alpha[k]);
           while (alpha[k] * bound + beta < 0) --bound;
           while (alpha[k] * (bound + 1) + beta >= 0) ++bound;
           x1 = std::min(x1, bound);

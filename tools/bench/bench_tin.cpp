@@ -304,7 +304,7 @@ std::string checksOf(const TinErrorStatistics& stats, std::size_t clockwise, dou
 struct Row {
   std::string raster;
   double max_error_m = 0;
-  double ours_s = 0, delatin_s = 0;
+  double speed = 0;  // median of the pairs' Delatin time / our time
   std::size_t ours_triangles = 0, delatin_triangles = 0;
 };
 
@@ -328,7 +328,8 @@ void benchRaster(const std::string& path, const BenchOptions& options, const fs:
                 "and buildTin rejects nodata\n", nodata, dem.pixelCount());
     return;
   }
-  std::printf("median of %d runs after 1 warm-up each; terratiles on %d thread(s); Delatin time = "
+  std::printf("%d pairs of runs (terratiles, then Delatin), each tool warmed up; medians; speed = "
+              "median of the pairs' ratios; terratiles on %d thread(s); Delatin time = "
               "new Delatin() + run()\n", options.runs, options.threads);
   std::printf("%-10s %-11s %9s %10s %10s %9s %9s  %s\n", "max error", "tool", "time [s]",
               "triangles", "vertices", "max [m]", "rms [m]", "checks");
@@ -336,25 +337,33 @@ void benchRaster(const std::string& path, const BenchOptions& options, const fs:
   const fs::path raw = scratch / "grid.f32";
   writeRawGrid(dem, raw);
   for (const double max_error_m : options.max_errors_m) {
-    std::fprintf(stderr, "%s at %g m: terratiles...\n", name.c_str(), max_error_m);
+    // Side by side: run r times ours, then Delatin (its own process: one warm-up build, then
+    // one timed), so both see the same machine state; noise that lasts longer than a pair
+    // cancels in the pair's ratio. Reported: the median times and the median of the ratios.
     Progress quiet(ProgressMode::Quiet);
     const TinOptions tin_options{.max_error_m = max_error_m};
+    std::fprintf(stderr, "%s at %g m: warm-up\n", name.c_str(), max_error_m);
     TinMesh ours = buildTin(dem, tin_options, quiet);  // warm-up
-    std::vector<double> ours_runs;
-    for (int r = 0; r < options.runs; ++r) {
-      const auto start = std::chrono::steady_clock::now();
-      ours = buildTin(dem, tin_options, quiet);
-      ours_runs.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-    }
-    const double ours_s = median(ours_runs);
-
-    std::fprintf(stderr, "%s at %g m: delatin...\n", name.c_str(), max_error_m);
     char error_text[64];
     std::snprintf(error_text, sizeof error_text, "%.17g", max_error_m);
     const fs::path out = scratch / "delatin.bin";
-    runProcess({options.node, options.script, raw.string(), std::to_string(dem.width),
-                std::to_string(dem.height), error_text, std::to_string(options.runs), out.string()});
-    DelatinResult delatin = readDelatinMesh(out, dem);
+    std::vector<double> ours_runs, delatin_runs, delatin_run_only, ratios;
+    DelatinResult delatin;
+    for (int r = 0; r < options.runs; ++r) {
+      std::fprintf(stderr, "%s at %g m: pair %d of %d\n", name.c_str(), max_error_m, r + 1, options.runs);
+      const auto start = std::chrono::steady_clock::now();
+      ours = buildTin(dem, tin_options, quiet);
+      ours_runs.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      runProcess({options.node, options.script, raw.string(), std::to_string(dem.width),
+                  std::to_string(dem.height), error_text, "1", out.string()});
+      delatin = readDelatinMesh(out, dem);
+      delatin_runs.push_back(delatin.build_s);
+      delatin_run_only.push_back(delatin.run_only_s);
+      ratios.push_back(delatin.build_s / ours_runs.back());
+    }
+    const double ours_s = median(ours_runs);
+    delatin.build_s = median(delatin_runs);
+    delatin.run_only_s = median(delatin_run_only);
     delatin.flipped_triangles = flipToCounterClockwise(delatin.mesh);
 
     const TinErrorStatistics ours_stats = measureTin(dem, ours);
@@ -371,15 +380,14 @@ void benchRaster(const std::string& path, const BenchOptions& options, const fs:
     std::snprintf(run_only, sizeof run_only, "; run() alone %.3f s, own getMaxError %.4f",
                   delatin.run_only_s, delatin.own_max_error_m);
     printToolLine("", "delatin", delatin.build_s, delatin.mesh, delatin_stats, delatin_checks + run_only);
-    const double speed = delatin.build_s / ours_s;
+    const double speed = median(ratios);
     const double triangles = static_cast<double>(ours.triangleCount()) /
                              static_cast<double>(delatin.mesh.triangleCount());
     std::printf("%-10s %-11s %8.2fx %10.4f %10s %9s %9s  speed >= %gx: %s, triangles <= %g: %s\n", "",
                 "ratio", speed, triangles, "", "", "", kSpeedTarget, speed >= kSpeedTarget ? "yes" : "NO",
                 kTriangleRatioTarget, triangles <= kTriangleRatioTarget ? "yes" : "NO");
     std::fflush(stdout);
-    summary.push_back({name, max_error_m, ours_s, delatin.build_s, ours.triangleCount(),
-                       delatin.mesh.triangleCount()});
+    summary.push_back({name, max_error_m, speed, ours.triangleCount(), delatin.mesh.triangleCount()});
   }
 }
 
@@ -392,10 +400,10 @@ int runBench(int argc, char** argv) {
   std::vector<Row> summary;
   for (const std::string& raster : options.rasters) benchRaster(raster, options, scratch.path(), summary);
 
-  std::printf("\n== summary: speed = delatin time / terratiles time (target >= %gx), "
+  std::printf("\n== summary: speed = median over pairs of delatin time / terratiles time (target >= %gx), "
               "triangles = terratiles / delatin (target <= %g)\n", kSpeedTarget, kTriangleRatioTarget);
   for (const Row& row : summary) {
-    const double speed = row.delatin_s / row.ours_s;
+    const double speed = row.speed;
     const double triangles = static_cast<double>(row.ours_triangles) / static_cast<double>(row.delatin_triangles);
     std::printf("%-36s %6g m  speed %7.2fx %-3s  triangles %7.4f %s\n", row.raster.c_str(),
                 row.max_error_m, speed, speed >= kSpeedTarget ? "ok" : "NO", triangles,
