@@ -52,6 +52,55 @@ __attribute__((target("avx2"))) double rowMaxErrorAvx2(const float* row, std::in
   return row_max;
 }
 const bool kHasAvx2 = __builtin_cpu_supports("avx2");
+
+// The largest |gx * x + row_z - row[x]| over x in [x0, x1] where the three edge functions
+// w_k + (x - x0) * alpha_k are all >= 0, or -1 when there is none. The edge functions are
+// integers below 2^40 here, exact in doubles.
+__attribute__((target("avx2"))) double rowMaxErrorInsideAvx2(const float* row, std::int32_t x0, std::int32_t x1,
+                                                             double gx, double row_z, std::int64_t w0,
+                                                             std::int64_t w1, std::int64_t w2,
+                                                             const std::int64_t alpha[3]) {
+  const __m256d sign = _mm256_set1_pd(-0.0), zero = _mm256_setzero_pd(), outside = _mm256_set1_pd(-1.0);
+  const __m256d vgx = _mm256_set1_pd(gx), vrow_z = _mm256_set1_pd(row_z), four = _mm256_set1_pd(4.0);
+  const __m256d lane = _mm256_set_pd(3, 2, 1, 0);
+  __m256d vw0 = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w0)),
+                              _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[0]))));
+  __m256d vw1 = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w1)),
+                              _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[1]))));
+  __m256d vw2 = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w2)),
+                              _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[2]))));
+  const __m256d step0 = _mm256_set1_pd(4.0 * static_cast<double>(alpha[0]));
+  const __m256d step1 = _mm256_set1_pd(4.0 * static_cast<double>(alpha[1]));
+  const __m256d step2 = _mm256_set1_pd(4.0 * static_cast<double>(alpha[2]));
+  const double first = static_cast<double>(x0);
+  __m256d vx = _mm256_set_pd(first + 3, first + 2, first + 1, first);
+  __m256d vmax = outside;
+  std::int32_t x = x0;
+  for (; x + 3 <= x1; x += 4) {
+    const __m256d h = _mm256_cvtps_pd(_mm_loadu_ps(row + x));
+    const __m256d z = _mm256_add_pd(_mm256_mul_pd(vgx, vx), vrow_z);
+    const __m256d error = _mm256_andnot_pd(sign, _mm256_sub_pd(z, h));
+    const __m256d inside = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(vw0, zero, _CMP_GE_OQ),
+                                                       _mm256_cmp_pd(vw1, zero, _CMP_GE_OQ)),
+                                         _mm256_cmp_pd(vw2, zero, _CMP_GE_OQ));
+    vmax = _mm256_max_pd(vmax, _mm256_blendv_pd(outside, error, inside));
+    vx = _mm256_add_pd(vx, four);
+    vw0 = _mm256_add_pd(vw0, step0);
+    vw1 = _mm256_add_pd(vw1, step1);
+    vw2 = _mm256_add_pd(vw2, step2);
+  }
+  const __m128d half = _mm_max_pd(_mm256_castpd256_pd128(vmax), _mm256_extractf128_pd(vmax, 1));
+  double row_max = std::max(_mm_cvtsd_f64(half), _mm_cvtsd_f64(_mm_unpackhi_pd(half, half)));
+  const std::int64_t done = x - x0;
+  w0 += done * alpha[0];
+  w1 += done * alpha[1];
+  w2 += done * alpha[2];
+  for (; x <= x1; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
+    if ((w0 | w1 | w2) < 0) continue;
+    row_max = std::max(row_max, std::fabs(gx * static_cast<double>(x) + row_z - row[x]));
+  }
+  return row_max;
+}
 #endif
 
 inline double rowMaxError(const float* row, std::int64_t x0, std::int64_t x1, double gx, double row_z) {
@@ -403,8 +452,9 @@ class GreedyInsertion {
     // Plane z = gx * x + gy * y + z0 through the three vertices.
     const double ux = b.x - a.x, uy = b.y - a.y, vx = c.x - a.x, vy = c.y - a.y;
     const double dz1 = zb - za, dz2 = zc - za;
-    const double gx = (dz1 * vy - dz2 * uy) / static_cast<double>(area2);
-    const double gy = (dz2 * ux - dz1 * vx) / static_cast<double>(area2);
+    const double inverse_area2 = 1.0 / static_cast<double>(area2);
+    const double gx = (dz1 * vy - dz2 * uy) * inverse_area2;
+    const double gy = (dz2 * ux - dz1 * vx) * inverse_area2;
     const double z0 = za - gx * a.x - gy * a.y;
 
     // Edge functions w(x) = alpha * x + beta(y) >= 0 inside, for edges a->b, b->c, c->a.
@@ -423,7 +473,6 @@ class GreedyInsertion {
       alpha[k] = -std::int64_t{to[k].y - from[k].y};
       beta_step[k] = std::int64_t{to[k].x - from[k].x};
       beta_at_0[k] = -beta_step[k] * from[k].y + std::int64_t{to[k].y - from[k].y} * from[k].x;
-      inverse_alpha[k] = alpha[k] != 0 ? 1.0 / static_cast<double>(alpha[k]) : 0.0;
     }
     if (max_x - min_x < kNarrowTriangle) {
       // Narrow: walk the bounding box with incremental edge functions; computing each row's
@@ -441,6 +490,22 @@ class GreedyInsertion {
         const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
         const double row_z = gy * y + z0;
         std::int64_t w0 = w_row[0], w1 = w_row[1], w2 = w_row[2];
+#if defined(__x86_64__)
+        if (!has_nodata_ && kHasAvx2) {
+          // The row's largest error inside the triangle four pixels at a time, then its
+          // position only if it wins (same expression, so equality finds it).
+          const double row_max = rowMaxErrorInsideAvx2(row, x_first, x_last, gx, row_z, w0, w1, w2, alpha);
+          if (row_max > best_error) {
+            for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
+              if ((w0 | w1 | w2) >= 0 && std::fabs(gx * static_cast<double>(x) + row_z - row[x]) == row_max) {
+                best_error = row_max;
+                best = {x, y};
+                break;
+              }
+            }
+          }
+        } else
+#endif
         if (!has_nodata_) {
           // Branch-free: a pixel outside (some edge function negative) scores -1.
           for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
@@ -469,6 +534,9 @@ class GreedyInsertion {
         }
         for (int k = 0; k < 3; ++k) w_row[k] += beta_step[k];
       }
+    }
+    if (max_x - min_x >= kNarrowTriangle) {
+      for (int k = 0; k < 3; ++k) inverse_alpha[k] = alpha[k] != 0 ? 1.0 / static_cast<double>(alpha[k]) : 0.0;
     }
     for (std::int32_t y = min_y; y <= max_y && max_x - min_x >= kNarrowTriangle; ++y) {
       std::int64_t x0 = min_x, x1 = max_x;
