@@ -1,0 +1,101 @@
+#pragma once
+// simplifyClusters: one level of the LoD loop's simplification (DESIGN.md 2, step 3c-e; paper
+// sections 3.3-3.4): edge collapse inside every cluster of a partitioned TIN, with every
+// cluster border, the dataset's outer border and the feature constraints locked.
+//
+// Each cluster's triangles become one CGAL::Surface_mesh (Simple_cartesian<double>, points
+// (col * metres_per_col, -row * metres_per_row, height_m): metres in x east, y north and z, so
+// the mesh is counter-clockwise seen from above like TinMesh). CGAL's
+// Surface_mesh_simplification::edge_collapse simplifies it with Garland-Heckbert plane
+// quadrics, an edge_is_constrained_map holding every border edge of the cluster's submesh and
+// every constrained edge, and Constrained_placement, so a vertex on a locked edge never moves
+// and a chord between two locked vertices is never collapsed (CGAL refuses an edge whose two
+// ends both touch a constrained edge). A cluster stops when its edge count falls below
+// options.edge_ratio of its initial count (CGAL 5.5 Count_ratio_stop_predicate, called
+// Edge_count_ratio_stop_predicate from CGAL 5.6), or when no collapse is left that the filter
+// accepts. The filter refuses a collapse when
+//   (a) one of the triangles it creates would be clockwise, or degenerate (twice its area
+//       below 1e-9 times its longest edge squared), in the (col, row) plane: the level stays
+//       a height field without fold-overs, and covers exactly the same ground, or
+//   (b) one of the triangles it creates is more than options.max_error_m away from a valid
+//       DEM pixel it covers (pixel centres at whole (col, row), linear interpolation, the
+//       inclusion rule of measureTin; nodata skipped; not tested when the budget is infinite).
+// So with a finite budget, every triangle the simplification creates is within the budget
+// of the DEM (triangles it does not touch keep the error they had).
+//
+// The quadrics are Garland and Heckbert's plane quadrics exactly as CGAL's
+// GarlandHeckbert_plane_policies builds them (unit face normals; border edges add a
+// perpendicular plane weighted 100), written here on 4x4 doubles because CGAL's class needs
+// Eigen. The placement is the quadric optimum when it is well conditioned and lies inside the
+// star of the edge seen from above, otherwise the best point of the edge segment that does.
+//
+// Vertices: a collapse keeps one of its two input vertices (CGAL chooses which; when the new
+// point is one end's point, that end's vertex survives). The output holds the surviving input
+// vertices in input order, each with its input GridPoint bit for bit unless a collapse moved
+// it (then (x / metres_per_col, -y / metres_per_row, z)). A vertex on a locked edge, and so
+// every vertex shared by two clusters, never moves and always survives. Input vertices no
+// triangle uses are dropped. Triangles: cluster by cluster in cluster id order, each
+// cluster's in its own order; counter-clockwise seen from above. The result does not depend
+// on the number of threads (clusters are simplified in parallel with TBB, each into its own
+// slot, and assembled by vertex index; there is no welding tolerance).
+//
+// Input: an edge-manifold, consistently oriented TinMesh (vertex-manifold is not needed: a
+// vertex where two fans of one cluster touch is split inside that cluster's submesh, and is
+// locked there). Throws Error(ErrorCode::Input) with a one-line message when a triangle uses a
+// vertex index out of range or the same vertex twice, an edge is in more than two triangles,
+// two triangles run an edge in the same direction, cluster_of_face does not hold one id in
+// [0, cluster_count) per triangle, or a constrained edge is not an edge of the mesh; throws
+// Error(ErrorCode::Usage) for options out of range. Memory: O(triangles) for the topology plus
+// one cluster's Surface_mesh per thread. Time: O(F log F) plus the collapses, which are
+// O(E log E) per cluster and, with a finite budget, O(pixels under the star) per collapse.
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "src/dem/dem_grid.h"
+#include "src/tin/tin_mesh.h"
+
+namespace terratiles {
+
+struct SimplifyOptions {
+  // Each cluster stops when its edge count falls below this fraction of its initial count
+  // (paper 3.4: 50 %). In (0, 1]; 1 leaves the mesh as it is.
+  double edge_ratio = 0.5;
+  // Level error budget, metres: a collapse is refused if any triangle it creates would be
+  // more than this above or below a valid DEM pixel it covers. >= 0; infinity: no test.
+  double max_error_m = std::numeric_limits<double>::infinity();
+  // Ground size of one grid unit along columns and rows, metres (> 0), so the quadrics see
+  // metres in x, y and z. For a projected CRS in metres, the pixel size; for degrees, the
+  // pixel size times the metres per degree at the DEM's latitude.
+  double metres_per_col = 1;
+  double metres_per_row = 1;
+};
+
+struct ClusterSimplification {
+  // The coarser level: the surviving input vertices in input order, and nothing else.
+  TinMesh mesh;
+  // Per input vertex: its index in mesh.vertices, or kRemovedVertex.
+  std::vector<std::uint32_t> new_index_of_vertex;
+  // Collapses the filter refused (statistics; a refused edge is tried again when a
+  // neighbouring collapse changes its star): (b) above the error budget, (a) fold-over.
+  std::size_t refused_for_error = 0;
+  std::size_t refused_for_flip = 0;
+};
+
+inline constexpr std::uint32_t kRemovedVertex = 0xffffffff;
+
+// dem: the source DEM, for the error budget (read only). mesh: the level to simplify, in the
+// DEM's grid frame. cluster_of_face: one cluster id per triangle, in [0, cluster_count);
+// clusters may be empty, disconnected or touch themselves at a vertex. constrained_edges:
+// extra locked edges (feature constraints) as pairs of vertex indices, either order; may be
+// empty.
+ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
+                                       const std::vector<std::int32_t>& cluster_of_face,
+                                       std::int32_t cluster_count,
+                                       const std::vector<std::array<std::uint32_t, 2>>& constrained_edges,
+                                       const SimplifyOptions& options);
+
+}  // namespace terratiles

@@ -1,0 +1,488 @@
+#include <doctest/doctest.h>
+
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "formats/dem/read_dem.h"
+#include "src/base/error.h"
+#include "src/base/progress.h"
+#include "src/simplify/simplify_clusters.h"
+#include "src/tin/build_tin.h"
+#include "src/tin/measure_tin.h"
+#include "tests/test_support.h"
+
+using namespace terratiles;
+
+namespace {
+
+// A real raster and its finest TIN, built once per test binary run.
+struct RealLevel {
+  DemGrid dem;
+  TinMesh tin;
+  double metres_per_col = 1;
+  double metres_per_row = 1;
+};
+
+RealLevel loadLevel(const std::string& name, double tin_max_error_m, bool degrees) {
+  RealLevel level;
+  level.dem = readDem({test::sharedData(name)});
+  Progress progress;
+  level.tin = buildTin(level.dem, TinOptions{tin_max_error_m}, progress);
+  if (degrees) {
+    // Metres per degree on a sphere of the WGS84 semi-major axis, at the raster's middle.
+    const double metres_per_degree = 6378137.0 * M_PI / 180.0;
+    const double middle_lat_deg = level.dem.origin_y - 0.5 * level.dem.height * level.dem.pixel_size_y;
+    level.metres_per_col = level.dem.pixel_size_x * metres_per_degree * std::cos(middle_lat_deg * M_PI / 180.0);
+    level.metres_per_row = level.dem.pixel_size_y * metres_per_degree;
+  } else {
+    level.metres_per_col = level.dem.pixel_size_x;
+    level.metres_per_row = level.dem.pixel_size_y;
+  }
+  return level;
+}
+
+const RealLevel& interlaken() {
+  static const RealLevel level = loadLevel("ch_dhm25_interlaken_25m_2056.tif", 2.0, false);
+  return level;
+}
+
+const RealLevel& gothenburg() {
+  static const RealLevel level = loadLevel("srtm3_N57E011_4326.tif", 10.0, true);
+  return level;
+}
+
+SimplifyOptions optionsFor(const RealLevel& level, double max_error_m) {
+  SimplifyOptions options;
+  options.max_error_m = max_error_m;
+  options.metres_per_col = level.metres_per_col;
+  options.metres_per_row = level.metres_per_row;
+  return options;
+}
+
+struct Partition {
+  std::vector<std::int32_t> cluster_of_face;
+  std::int32_t cluster_count = 0;
+};
+
+// Cluster = the cell of a grid of cell_px x cell_px pixels that holds the triangle's centroid.
+// Centroids make ragged borders, so clusters may be split or touch themselves at a vertex.
+Partition cellPartition(const TinMesh& mesh, const DemGrid& dem, int cell_px) {
+  Partition partition;
+  const int cells_x = (dem.width + cell_px - 1) / cell_px;
+  const int cells_y = (dem.height + cell_px - 1) / cell_px;
+  partition.cluster_count = cells_x * cells_y;
+  for (std::size_t t = 0; t < mesh.triangleCount(); ++t) {
+    double col = 0, row = 0;
+    for (int k = 0; k < 3; ++k) {
+      col += mesh.vertices[mesh.triangle_indices[3 * t + k]].col / 3;
+      row += mesh.vertices[mesh.triangle_indices[3 * t + k]].row / 3;
+    }
+    const int cx = std::min(cells_x - 1, static_cast<int>(col / cell_px));
+    const int cy = std::min(cells_y - 1, static_cast<int>(row / cell_px));
+    partition.cluster_of_face.push_back(cy * cells_x + cx);
+  }
+  return partition;
+}
+
+std::uint64_t edgeKey(std::uint32_t u, std::uint32_t v) {
+  return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
+}
+
+struct EdgeUse {
+  std::uint64_t key;
+  std::uint32_t face;
+  bool forward;  // min -> max in the triangle's order
+};
+
+std::vector<EdgeUse> edgeUses(const TinMesh& mesh) {
+  std::vector<EdgeUse> uses;
+  for (std::uint32_t t = 0; t < mesh.triangleCount(); ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t u = mesh.triangle_indices[3 * t + k];
+      const std::uint32_t v = mesh.triangle_indices[3 * t + (k + 1) % 3];
+      uses.push_back({edgeKey(u, v), t, u < v});
+    }
+  }
+  std::sort(uses.begin(), uses.end(), [](const EdgeUse& l, const EdgeUse& r) {
+    return l.key != r.key ? l.key < r.key : l.face < r.face;
+  });
+  return uses;
+}
+
+struct EdgeSummary {
+  std::vector<std::uint64_t> all;         // every undirected edge, sorted
+  std::vector<std::uint64_t> border;      // in one triangle
+  std::vector<std::uint64_t> cut;         // between two triangles of different clusters
+  std::vector<std::uint64_t> inner;       // between two triangles of one cluster
+  std::size_t non_manifold = 0;           // in more than two triangles
+  std::size_t inconsistent = 0;           // run twice in the same direction
+};
+
+EdgeSummary summarise(const TinMesh& mesh, const std::vector<std::int32_t>* cluster_of_face) {
+  EdgeSummary summary;
+  const std::vector<EdgeUse> uses = edgeUses(mesh);
+  for (std::size_t i = 0; i < uses.size();) {
+    std::size_t j = i;
+    while (j < uses.size() && uses[j].key == uses[i].key) ++j;
+    summary.all.push_back(uses[i].key);
+    if (j - i == 1) {
+      summary.border.push_back(uses[i].key);
+    } else if (j - i == 2) {
+      if (uses[i].forward == uses[i + 1].forward) ++summary.inconsistent;
+      if (cluster_of_face && (*cluster_of_face)[uses[i].face] != (*cluster_of_face)[uses[i + 1].face]) {
+        summary.cut.push_back(uses[i].key);
+      } else {
+        summary.inner.push_back(uses[i].key);
+      }
+    } else {
+      ++summary.non_manifold;
+    }
+    i = j;
+  }
+  return summary;
+}
+
+// Random inner edges (fixed seed) as feature constraints.
+std::vector<std::array<std::uint32_t, 2>> randomConstraints(const EdgeSummary& edges, double share) {
+  std::mt19937 random(20240611);
+  std::bernoulli_distribution pick(share);
+  std::vector<std::array<std::uint32_t, 2>> constraints;
+  for (const std::uint64_t key : edges.inner) {
+    // Either order is accepted: give half of them reversed.
+    if (pick(random)) {
+      const auto u = static_cast<std::uint32_t>(key >> 32), v = static_cast<std::uint32_t>(key & 0xffffffffu);
+      constraints.push_back(constraints.size() % 2 ? std::array<std::uint32_t, 2>{v, u} : std::array<std::uint32_t, 2>{u, v});
+    }
+  }
+  return constraints;
+}
+
+// Vertices where one cluster has two or more fans of triangles (they touch at the vertex
+// only): around a vertex, a cluster's open fans each have one triangle more than inner edges.
+std::size_t pinchedVertices(const TinMesh& mesh, const Partition& partition) {
+  std::vector<std::pair<std::uint64_t, int>> count;  // (vertex << 32 | cluster, +1 per triangle, -1 per inner edge)
+  for (std::uint32_t t = 0; t < mesh.triangleCount(); ++t) {
+    for (int k = 0; k < 3; ++k) {
+      count.push_back({(std::uint64_t{mesh.triangle_indices[3 * t + k]} << 32) |
+                           static_cast<std::uint32_t>(partition.cluster_of_face[t]),
+                       1});
+    }
+  }
+  const std::vector<EdgeUse> uses = edgeUses(mesh);
+  for (std::size_t i = 0; i + 1 < uses.size(); ++i) {
+    if (uses[i].key != uses[i + 1].key) continue;
+    const std::int32_t cluster = partition.cluster_of_face[uses[i].face];
+    if (cluster != partition.cluster_of_face[uses[i + 1].face]) continue;
+    for (const std::uint64_t vertex : {uses[i].key >> 32, uses[i].key & 0xffffffffu}) {
+      count.push_back({(vertex << 32) | static_cast<std::uint32_t>(cluster), -1});
+    }
+  }
+  std::sort(count.begin(), count.end());
+  std::size_t pinched = 0;
+  for (std::size_t i = 0; i < count.size();) {
+    int fans = 0;
+    std::size_t j = i;
+    for (; j < count.size() && count[j].first == count[i].first; ++j) fans += count[j].second;
+    if (fans >= 2) ++pinched;
+    i = j;
+  }
+  return pinched;
+}
+
+bool sameBits(const GridPoint& a, const GridPoint& b) {
+  return a.col == b.col && a.row == b.row && a.height_m == b.height_m;
+}
+
+// Twice the signed area in (col, row): negative is counter-clockwise seen from above.
+double signedArea2(const TinMesh& mesh, std::size_t t) {
+  const GridPoint& a = mesh.vertices[mesh.triangle_indices[3 * t]];
+  const GridPoint& b = mesh.vertices[mesh.triangle_indices[3 * t + 1]];
+  const GridPoint& c = mesh.vertices[mesh.triangle_indices[3 * t + 2]];
+  return (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+}
+
+double footprintArea(const TinMesh& mesh) {
+  double area = 0;
+  for (std::size_t t = 0; t < mesh.triangleCount(); ++t) area -= 0.5 * signedArea2(mesh, t);
+  return area;
+}
+
+struct LevelReport {
+  std::size_t input_edges = 0;
+  std::size_t output_edges = 0;
+  std::size_t cut_edges = 0;
+  double expected_ratio = 0;  // if every cluster stopped right at the edge ratio
+  TinErrorStatistics before, after;
+};
+
+// Every invariant of a simplified level, with REQUIRE/CHECK inside.
+LevelReport checkLevel(const DemGrid& dem, const TinMesh& input, const Partition& partition,
+                       const std::vector<std::array<std::uint32_t, 2>>& constraints,
+                       const ClusterSimplification& result, double edge_ratio) {
+  LevelReport report;
+  const TinMesh& output = result.mesh;
+  const auto& new_index = result.new_index_of_vertex;
+  REQUIRE(new_index.size() == input.vertices.size());
+
+  // Surviving input vertices in input order, nothing else; unmoved ones bit for bit.
+  std::uint32_t next = 0;
+  std::size_t moved = 0;
+  for (std::size_t v = 0; v < new_index.size(); ++v) {
+    if (new_index[v] == kRemovedVertex) continue;
+    REQUIRE(new_index[v] == next);
+    ++next;
+    if (!sameBits(output.vertices[new_index[v]], input.vertices[v])) ++moved;
+  }
+  REQUIRE(next == output.vertices.size());
+
+  // Locked edges survive: same two vertices at bit-identical positions, still an edge.
+  const EdgeSummary in_edges = summarise(input, &partition.cluster_of_face);
+  const EdgeSummary out_edges = summarise(output, nullptr);
+  auto require_kept = [&](std::uint32_t u, std::uint32_t v) {
+    REQUIRE(new_index[u] != kRemovedVertex);
+    REQUIRE(new_index[v] != kRemovedVertex);
+    REQUIRE(sameBits(output.vertices[new_index[u]], input.vertices[u]));
+    REQUIRE(sameBits(output.vertices[new_index[v]], input.vertices[v]));
+    REQUIRE(std::binary_search(out_edges.all.begin(), out_edges.all.end(), edgeKey(new_index[u], new_index[v])));
+  };
+  for (const auto& keys : {in_edges.border, in_edges.cut}) {
+    for (const std::uint64_t key : keys) {
+      require_kept(static_cast<std::uint32_t>(key >> 32), static_cast<std::uint32_t>(key & 0xffffffffu));
+    }
+  }
+  for (const auto& edge : constraints) require_kept(edge[0], edge[1]);
+
+  // A valid height field over the same ground: edge-manifold, consistently oriented, every
+  // triangle counter-clockwise seen from above, the same outer border edge for edge, the same
+  // area. With no fold-over, these mean the same footprint tiled once.
+  CHECK(out_edges.non_manifold == 0);
+  CHECK(out_edges.inconsistent == 0);
+  std::size_t not_upward = 0;
+  for (std::size_t t = 0; t < output.triangleCount(); ++t) {
+    if (!(signedArea2(output, t) < 0)) ++not_upward;
+  }
+  CHECK(not_upward == 0);
+  CHECK(out_edges.border.size() == in_edges.border.size());
+  CHECK(footprintArea(output) == doctest::Approx(footprintArea(input)).epsilon(1e-9));
+
+  report.before = measureTin(dem, input);
+  report.after = measureTin(dem, output);
+  CHECK(report.after.degenerate_triangles == 0);
+  CHECK(report.after.uncovered_valid_pixels == report.before.uncovered_valid_pixels);
+  CHECK(report.after.covered_nodata_pixels == report.before.covered_nodata_pixels);
+  CHECK(report.after.measured_pixels == report.before.measured_pixels);
+
+  report.input_edges = in_edges.all.size();
+  report.output_edges = out_edges.all.size();
+  report.cut_edges = in_edges.cut.size();
+  // Each cluster counts its own edges, so a cut edge counts in both of its clusters: if every
+  // cluster ends at edge_ratio of its count, the level keeps ratio * (E + C) - C of E edges.
+  report.expected_ratio =
+      (edge_ratio * static_cast<double>(report.input_edges + report.cut_edges) - static_cast<double>(report.cut_edges)) /
+      static_cast<double>(report.input_edges);
+  MESSAGE("vertices " << input.vertices.size() << " -> " << output.vertices.size() << " (" << moved
+                      << " moved), triangles " << input.triangleCount() << " -> " << output.triangleCount()
+                      << ", edges " << report.input_edges << " -> " << report.output_edges << " (ratio "
+                      << static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges)
+                      << ", all clusters at the target: " << report.expected_ratio << "), cut edges "
+                      << report.cut_edges << ", constraints " << constraints.size() << ", refused for error "
+                      << result.refused_for_error << ", for fold-over " << result.refused_for_flip
+                      << ", max error " << report.before.max_error_m << " -> " << report.after.max_error_m
+                      << " m, rms " << report.before.rms_error_m << " -> " << report.after.rms_error_m << " m");
+  return report;
+}
+
+ClusterSimplification simplify(const DemGrid& dem, const TinMesh& mesh, const Partition& partition,
+                               const std::vector<std::array<std::uint32_t, 2>>& constraints,
+                               const SimplifyOptions& options) {
+  return simplifyClusters(dem, mesh, partition.cluster_of_face, partition.cluster_count, constraints, options);
+}
+
+double seconds(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+TEST_SUITE("simplify") {
+  TEST_CASE("on the Interlaken TIN locked borders and constraints survive and half the edges go") {
+    const RealLevel& level = interlaken();
+    const Partition partition = cellPartition(level.tin, level.dem, 48);
+    const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.02);
+    const SimplifyOptions options = optionsFor(level, std::numeric_limits<double>::infinity());
+    const auto start = std::chrono::steady_clock::now();
+    const ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
+    MESSAGE("Interlaken level: " << seconds(start) << " s");
+    const LevelReport report = checkLevel(level.dem, level.tin, partition, constraints, result, options.edge_ratio);
+    // Every cluster stops just below half its edges (3 edges go per collapse), unless the
+    // filter or its locked edges leave it stuck above: within 2 % of E of the ideal count.
+    const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
+    CHECK(ratio < report.expected_ratio + 0.02);
+    CHECK(ratio > report.expected_ratio - 0.02);
+    // Unbounded, the error grows beyond the TIN's 2 m.
+    CHECK(report.after.max_error_m > report.before.max_error_m);
+  }
+
+  TEST_CASE("on the Interlaken TIN an error budget of 5 m holds on every pixel") {
+    const RealLevel& level = interlaken();
+    const Partition partition = cellPartition(level.tin, level.dem, 48);
+    const SimplifyOptions options = optionsFor(level, 5.0);
+    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+    const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
+    CHECK(report.after.max_error_m <= 5.0);
+    CHECK(result.refused_for_error > 0);
+    // Two levels in a row: the coarser level simplified again stays within the budget.
+    const Partition coarser = cellPartition(result.mesh, level.dem, 96);
+    const ClusterSimplification again = simplify(level.dem, result.mesh, coarser, {}, options);
+    const LevelReport second = checkLevel(level.dem, result.mesh, coarser, {}, again, options.edge_ratio);
+    CHECK(second.after.max_error_m <= 5.0);
+  }
+
+  TEST_CASE("on the SRTM N57E011 TIN in degrees borders constraints and the footprint are kept") {
+    const RealLevel& level = gothenburg();
+    const Partition partition = cellPartition(level.tin, level.dem, 150);
+    const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.01);
+    const SimplifyOptions options = optionsFor(level, 20.0);
+    const auto start = std::chrono::steady_clock::now();
+    const ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
+    MESSAGE("N57E011 level: " << seconds(start) << " s");
+    const LevelReport report = checkLevel(level.dem, level.tin, partition, constraints, result, options.edge_ratio);
+    CHECK(report.after.max_error_m <= 20.0);
+    const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
+    CHECK(ratio < report.expected_ratio + 0.05);
+  }
+
+  TEST_CASE("on the Ontario lidar TIN with nodata the footprint and a 1 m budget hold") {
+    static const RealLevel level = loadLevel("ca_on_lidar_dtm_1m_26917.tif", 0.25, false);
+    const Partition partition = cellPartition(level.tin, level.dem, 64);
+    MESSAGE("vertices where a cluster's fans touch: " << pinchedVertices(level.tin, partition));
+    const SimplifyOptions options = optionsFor(level, 1.0);
+    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+    const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
+    const auto nodata = std::count_if(level.dem.heights_m.begin(), level.dem.heights_m.end(),
+                                      [](float h) { return std::isnan(h); });
+    MESSAGE("nodata pixels: " << nodata << " of " << level.dem.pixelCount());
+    CHECK(nodata > 0);  // the holes are there
+    CHECK(report.after.covered_nodata_pixels == 0);
+    CHECK(report.after.max_error_m <= 1.0);
+  }
+
+  TEST_CASE("the result is identical with one and two threads") {
+    const RealLevel& level = interlaken();
+    const Partition partition = cellPartition(level.tin, level.dem, 48);
+    const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.02);
+    const SimplifyOptions options = optionsFor(level, 10.0);
+    auto run = [&](int threads) {
+      tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
+      const auto start = std::chrono::steady_clock::now();
+      ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
+      MESSAGE("Interlaken level with " << threads << " thread(s): " << seconds(start) << " s");
+      return result;
+    };
+    const ClusterSimplification one = run(1);
+    const ClusterSimplification two = run(2);
+    REQUIRE(one.mesh.vertices.size() == two.mesh.vertices.size());
+    CHECK(std::equal(one.mesh.vertices.begin(), one.mesh.vertices.end(), two.mesh.vertices.begin(), sameBits));
+    CHECK(one.mesh.triangle_indices == two.mesh.triangle_indices);
+    CHECK(one.new_index_of_vertex == two.new_index_of_vertex);
+    CHECK(one.refused_for_error == two.refused_for_error);
+    CHECK(one.refused_for_flip == two.refused_for_flip);
+  }
+
+  TEST_CASE("split clusters pinched clusters single triangles and empty ids are simplified") {
+    const RealLevel& level = interlaken();
+    // A checkerboard of two clusters: each is many pieces that touch at cell corners (where
+    // the centroid rule also pinches fans), plus a one-triangle cluster and an empty id.
+    Partition partition = cellPartition(level.tin, level.dem, 40);
+    const int cells_x = (level.dem.width + 39) / 40;
+    for (std::int32_t& cluster : partition.cluster_of_face) cluster = (cluster % cells_x + cluster / cells_x) % 2;
+    partition.cluster_of_face[partition.cluster_of_face.size() / 2] = 2;
+    partition.cluster_count = 4;
+    const std::size_t pinched = pinchedVertices(level.tin, partition);
+    MESSAGE("vertices where a cluster's fans touch: " << pinched);
+    REQUIRE(pinched > 0);
+    const SimplifyOptions options = optionsFor(level, std::numeric_limits<double>::infinity());
+    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+    const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
+    CHECK(report.output_edges < report.input_edges * 0.6);
+  }
+
+  TEST_CASE("an edge ratio of 1 gives back the input") {
+    const RealLevel& level = interlaken();
+    const Partition partition = cellPartition(level.tin, level.dem, 48);
+    SimplifyOptions options;
+    options.edge_ratio = 1.0;
+    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+    REQUIRE(result.mesh.vertices.size() == level.tin.vertices.size());
+    CHECK(std::equal(result.mesh.vertices.begin(), result.mesh.vertices.end(), level.tin.vertices.begin(), sameBits));
+    CHECK(result.mesh.triangleCount() == level.tin.triangleCount());
+  }
+
+  TEST_CASE("bad input and options are refused with a clear error") {
+    const RealLevel& level = interlaken();
+    const Partition partition = cellPartition(level.tin, level.dem, 48);
+    const SimplifyOptions options;
+    auto code_of = [&](const TinMesh& mesh, const std::vector<std::int32_t>& clusters, std::int32_t count,
+                       const std::vector<std::array<std::uint32_t, 2>>& constraints, const SimplifyOptions& opts) {
+      try {
+        simplifyClusters(level.dem, mesh, clusters, count, constraints, opts);
+      } catch (const Error& error) {
+        return error.code();
+      }
+      return ErrorCode::Internal;  // no error: never expected here
+    };
+
+    std::vector<std::int32_t> clusters = partition.cluster_of_face;
+    clusters[7] = partition.cluster_count;
+    CHECK(code_of(level.tin, clusters, partition.cluster_count, {}, options) == ErrorCode::Input);
+    CHECK_THROWS_WITH(simplifyClusters(level.dem, level.tin, clusters, partition.cluster_count, {}, options),
+                      doctest::Contains("triangle 7 is in cluster"));
+    clusters[7] = -1;
+    CHECK(code_of(level.tin, clusters, partition.cluster_count, {}, options) == ErrorCode::Input);
+    clusters.pop_back();
+    CHECK_THROWS_WITH(simplifyClusters(level.dem, level.tin, clusters, partition.cluster_count, {}, options),
+                      doctest::Contains("expected one per triangle"));
+
+    // A third triangle on an inner edge.
+    const std::uint64_t inner = summarise(level.tin, nullptr).inner.front();
+    TinMesh fan = level.tin;
+    fan.vertices.push_back({0.5, 0.5, 600});
+    fan.triangle_indices.insert(fan.triangle_indices.end(),
+                                {static_cast<std::uint32_t>(inner >> 32), static_cast<std::uint32_t>(inner & 0xffffffffu),
+                                 static_cast<std::uint32_t>(fan.vertices.size() - 1)});
+    std::vector<std::int32_t> fan_clusters = partition.cluster_of_face;
+    fan_clusters.push_back(0);
+    CHECK(code_of(fan, fan_clusters, partition.cluster_count, {}, options) == ErrorCode::Input);
+    CHECK_THROWS_WITH(simplifyClusters(level.dem, fan, fan_clusters, partition.cluster_count, {}, options),
+                      doctest::Contains("expected an edge-manifold mesh"));
+
+    // One triangle turned over.
+    TinMesh flipped = level.tin;
+    const std::size_t middle = 3 * (flipped.triangleCount() / 2);
+    std::swap(flipped.triangle_indices[middle + 1], flipped.triangle_indices[middle + 2]);
+    CHECK(code_of(flipped, partition.cluster_of_face, partition.cluster_count, {}, options) == ErrorCode::Input);
+    CHECK_THROWS_WITH(simplify(level.dem, flipped, partition, {}, options), doctest::Contains("in the same direction"));
+
+    // A constraint that is not an edge.
+    const std::uint32_t a = level.tin.triangle_indices[0];
+    const std::vector<std::uint64_t> edges = summarise(level.tin, nullptr).all;
+    std::uint32_t far = 0;
+    while (far == a || std::binary_search(edges.begin(), edges.end(), edgeKey(a, far))) ++far;
+    CHECK_THROWS_WITH(simplify(level.dem, level.tin, partition, {{a, far}}, options),
+                      doctest::Contains("is not an edge of the mesh"));
+
+    SimplifyOptions bad = options;
+    bad.edge_ratio = 0;
+    CHECK(code_of(level.tin, partition.cluster_of_face, partition.cluster_count, {}, bad) == ErrorCode::Usage);
+    bad = options;
+    bad.metres_per_row = -25;
+    CHECK(code_of(level.tin, partition.cluster_of_face, partition.cluster_count, {}, bad) == ErrorCode::Usage);
+  }
+}
