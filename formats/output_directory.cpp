@@ -18,7 +18,8 @@ namespace {
 
 }  // namespace
 
-OutputDirectory::OutputDirectory(const fs::path& target, bool force) : target_(target) {
+OutputDirectory::OutputDirectory(const fs::path& target, bool force, const std::string& marker)
+    : target_(target) {
   std::error_code ec;
   if (target_.empty()) throw Error(ErrorCode::Usage, "the output directory name is empty");
   const fs::file_status status = fs::status(target_, ec);
@@ -31,8 +32,8 @@ OutputDirectory::OutputDirectory(const fs::path& target, bool force) : target_(t
         outputError(target_, "output directory is not empty",
                     "use --force to replace a previous output or choose another directory");
       }
-      if (!fs::exists(target_ / "tileset.json", ec)) {
-        outputError(target_, "is not empty and holds no tileset.json",
+      if (!fs::exists(target_ / marker, ec)) {
+        outputError(target_, "is not empty and holds no " + marker,
                     "refusing to replace it even with --force; choose another directory");
       }
     }

@@ -17,7 +17,9 @@ namespace terratiles {
 
 class OutputDirectory {
  public:
-  OutputDirectory(const std::filesystem::path& target, bool force);
+  // marker: the file that identifies a previous output of the same command, which force may
+  // replace (tileset.json for build, levels.json for levels).
+  OutputDirectory(const std::filesystem::path& target, bool force, const std::string& marker = "tileset.json");
   ~OutputDirectory();  // removes the staging directory unless committed
   OutputDirectory(const OutputDirectory&) = delete;
   OutputDirectory& operator=(const OutputDirectory&) = delete;

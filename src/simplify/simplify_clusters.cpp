@@ -667,8 +667,10 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
     result.mesh.vertices.push_back(position[v]);
   }
   result.mesh.triangle_indices.reserve(triangle_corners);
-  for (const ClusterOutput& out : outputs) {
-    for (const std::uint32_t v : out.triangles) result.mesh.triangle_indices.push_back(result.new_index_of_vertex[v]);
+  result.cluster_of_face.reserve(triangle_corners / 3);
+  for (std::size_t c = 0; c < outputs.size(); ++c) {
+    for (const std::uint32_t v : outputs[c].triangles) result.mesh.triangle_indices.push_back(result.new_index_of_vertex[v]);
+    result.cluster_of_face.insert(result.cluster_of_face.end(), outputs[c].triangles.size() / 3, static_cast<std::int32_t>(c));
   }
   return result;
 }

@@ -79,6 +79,9 @@ struct ClusterSimplification {
   TinMesh mesh;
   // Per input vertex: its index in mesh.vertices, or kRemovedVertex.
   std::vector<std::uint32_t> new_index_of_vertex;
+  // Per output triangle: the cluster it was simplified in (its borders are the input's
+  // cluster borders, so a fixed-border scheme can keep the partition).
+  std::vector<std::int32_t> cluster_of_face;
   // Collapses the filter refused (statistics; a refused edge is tried again when a
   // neighbouring collapse changes its star): (b) above the error budget, (a) fold-over.
   std::size_t refused_for_error = 0;

@@ -259,6 +259,17 @@ LevelReport checkLevel(const DemGrid& dem, const TinMesh& input, const Partition
   }
   for (const auto& edge : constraints) require_kept(edge[0], edge[1]);
 
+  // The output's clusters have the input's cluster borders, edge for edge: a fixed-border
+  // scheme can keep simplifying with them.
+  REQUIRE(result.cluster_of_face.size() == output.triangleCount());
+  const EdgeSummary out_clusters = summarise(output, &result.cluster_of_face);
+  std::vector<std::uint64_t> mapped_cut;
+  for (const std::uint64_t key : in_edges.cut) {
+    mapped_cut.push_back(edgeKey(new_index[static_cast<std::uint32_t>(key >> 32)], new_index[static_cast<std::uint32_t>(key & 0xffffffffu)]));
+  }
+  std::sort(mapped_cut.begin(), mapped_cut.end());
+  CHECK(out_clusters.cut == mapped_cut);
+
   // A valid height field over the same ground: edge-manifold, consistently oriented, every
   // triangle counter-clockwise seen from above, the same outer border edge for edge, the same
   // area. With no fold-over, these mean the same footprint tiled once.

@@ -11,7 +11,8 @@ cd "$(dirname "$0")/../.."
 
 packages=(g++ make cmake ccache pkg-config
   libcgal-dev libmetis-dev libtinygltf-dev libdraco-dev libgeographiclib-dev libgdal-dev
-  doctest-dev nlohmann-json3-dev libcli11-dev libtbb-dev libproj-dev proj-data nodejs npm)
+  doctest-dev nlohmann-json3-dev libcli11-dev libtbb-dev libproj-dev proj-data nodejs npm
+  libmeshoptimizer-dev)
 if [[ "${1:-}" == "--browser" ]]; then packages+=(chromium); fi
 
 missing=()

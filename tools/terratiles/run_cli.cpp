@@ -3,6 +3,8 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <tbb/global_control.h>
 #include <algorithm>
 #include <csignal>
 #include <cstdio>
@@ -22,7 +24,9 @@
 #include "src/pipeline/run_pipeline.h"
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
+#include "formats/output_directory.h"
 #include "formats/tin/tin_file.h"
+#include "src/lod/build_levels.h"
 #include "src/tin/build_tin.h"
 #include "src/tin/measure_tin.h"
 
@@ -196,6 +200,89 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   }
 }
 
+struct LevelsCommandOptions {
+  std::vector<std::string> inputs;
+  std::string output;
+  double tin_max_error_m = 0.5;
+  std::string partitioner = "metis";
+  double level_error_growth = 2;  // 0: no budget
+  std::size_t random_constraints = 0;
+  std::string format = "ply";
+  bool force = false;
+  int threads = 0;  // 0: all cores
+  LevelOptions levels;
+};
+
+// `terratiles levels`: DEM -> TIN -> the cluster levels of detail, each written as a TIN file
+// in the DEM's CRS, with levels.json (what each level is and its measured error).
+void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool quiet, std::ostream& err) {
+  const auto start = std::chrono::steady_clock::now();
+  std::optional<tbb::global_control> thread_limit;
+  if (options.threads > 0) {
+    thread_limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(options.threads));
+  }
+  OutputDirectory directory(options.output, options.force, "levels.json");
+  progress.beginStage("reading DEM", 0);
+  const DemGrid dem = readDem(options.inputs);
+  progress.endStage();
+  TinMesh tin = buildTin(dem, TinOptions{options.tin_max_error_m}, progress);
+  options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
+  if (options.level_error_growth > 0) {
+    options.levels.level_error_growth = options.level_error_growth;
+    options.levels.first_budget_m = options.tin_max_error_m * options.level_error_growth;
+  }
+  std::vector<std::array<std::uint32_t, 2>> constraints;
+  if (options.random_constraints > 0) {
+    constraints = randomFaceSetConstraints(tin, options.random_constraints, 8, options.levels.seed);
+  }
+  const std::size_t constraint_count = constraints.size();
+  const std::vector<Level> levels = buildLevels(dem, std::move(tin), options.levels, std::move(constraints), progress);
+
+  nlohmann::json summary;
+  summary["generator"] = std::string("terratiles ") + kVersion;
+  summary["inputs"] = options.inputs;
+  summary["crs"] = dem.crs_name;
+  summary["tin_max_error_m"] = options.tin_max_error_m;
+  summary["partitioner"] = options.partitioner;
+  summary["cluster_triangles"] = options.levels.cluster_triangles;
+  summary["level_ratio"] = options.levels.level_ratio;
+  summary["level_error_growth"] = options.level_error_growth;
+  summary["constrained_edges"] = constraint_count;
+  std::ostringstream table;
+  table << "level  triangles   vertices  clusters   max error   rms error     budget  file\n";
+  for (std::size_t l = 0; l < levels.size(); ++l) {
+    const Level& level = levels[l];
+    const std::string file = "level_" + std::to_string(l) + "." + options.format;
+    progress.beginStage("writing " + file, 0);
+    writeTinFile(level.mesh, dem.origin_x, dem.origin_y, dem.pixel_size_x, (directory.staging() / file).string());
+    progress.endStage();
+    summary["levels"].push_back({{"level", l},
+                                 {"file", file},
+                                 {"triangles", level.mesh.triangleCount()},
+                                 {"vertices", level.mesh.vertices.size()},
+                                 {"edges", level.edge_count},
+                                 {"clusters", level.partition.cluster_count},
+                                 {"max_error_m", level.error.max_error_m},
+                                 {"rms_error_m", level.error.rms_error_m},
+                                 {"budget_m", level.budget_m},
+                                 {"collapses_refused_for_error", level.refused_for_error},
+                                 {"collapses_refused_for_fold_over", level.refused_for_flip}});
+    char line[160];
+    std::snprintf(line, sizeof line, "%5zu %10zu %10zu %9d %9.3f m %9.3f m %8.3g m  %s\n", l,
+                  level.mesh.triangleCount(), level.mesh.vertices.size(), level.partition.cluster_count,
+                  level.error.max_error_m, level.error.rms_error_m, level.budget_m, file.c_str());
+    table << line;
+  }
+  directory.writeFile("levels.json", summary.dump(2) + "\n");
+  directory.commit();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!quiet) {
+    err << table.str() << "terratiles: wrote " << levels.size() << " levels to " << options.output << " ("
+        << dem.crs_name << ", clusters by " << options.partitioner << "); " << std::fixed << std::setprecision(2)
+        << seconds << " s\n" << std::flush;
+  }
+}
+
 // -q and --progress, shared by the commands that do long work.
 void addProgressOptions(CLI::App& command, bool& quiet, std::string& choice) {
   command.add_flag("-q,--quiet", quiet, "No progress and no summary on stderr");
@@ -305,6 +392,62 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
   addProgressOptions(*tin_command, quiet, progress_choice);
 
+  LevelsCommandOptions levels;
+  CLI::App* levels_command = app.add_subcommand(
+      "levels", "Build the cluster levels of detail (METIS clusters, CGAL edge collapse with "
+                "locked borders, re-partition per level) and write each level as a TIN file");
+  levels_command->footer(kExitCodes);
+  levels_command->add_option("INPUT", levels.inputs, "DEM rasters (as for build); adjacent files are mosaicked")
+      ->required();
+  levels_command
+      ->add_option("-o,--output", levels.output,
+                   "Output directory: level_0 (the finest TIN) .. level_N files and levels.json")
+      ->required();
+  levels_command->add_option("--tin-max-error", levels.tin_max_error_m, "The finest TIN's max vertical error, metres")
+      ->capture_default_str();
+  levels_command
+      ->add_option("--cluster-triangles", levels.levels.cluster_triangles,
+                   "Triangles per cluster: each level is split into ceil(triangles / N) clusters")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  levels_command
+      ->add_option("--level-ratio", levels.levels.level_ratio,
+                   "Edges a simplification keeps in every cluster, as a fraction (paper: 0.5)")
+      ->check(CLI::Range(0.01, 0.99))
+      ->capture_default_str();
+  levels_command
+      ->add_option("--level-error-growth", levels.level_error_growth,
+                   "Error budget: level l may not exceed tin-max-error * G^l metres anywhere "
+                   "(collapses that would are refused); 0: no budget, the ratio alone decides")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  levels_command
+      ->add_option("--levels", levels.levels.coarser_levels,
+                   "Coarser levels to build (0: until a level would not reach about --level-ratio of the "
+                   "edges, or 90 % of the triangles when held back by the error budget)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  levels_command
+      ->add_option("--partitioner", levels.partitioner,
+                   "metis (edge-cut minimisation) or random (random contiguous growth, for comparison)")
+      ->check(CLI::IsMember({"metis", "random"}))
+      ->capture_default_str();
+  levels_command
+      ->add_option("--random-constraints", levels.random_constraints,
+                   "Lock every edge of N random connected sets of 8 triangles at every level "
+                   "(the paper's stand-in for roads and buildings)")
+      ->capture_default_str();
+  levels_command->add_option("--seed", levels.levels.seed, "Seed of METIS and of the random choices")
+      ->capture_default_str();
+  levels_command->add_option("--format", levels.format, "TIN file format: ply (binary), off or obj")
+      ->check(CLI::IsMember({"ply", "off", "obj"}))
+      ->capture_default_str();
+  levels_command->add_option("--threads", levels.threads, "Threads to use (0: all cores); the output is the same")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  levels_command->add_flag("-f,--force", levels.force, "Replace OUTDIR when it holds a previous levels output");
+  addProgressOptions(*levels_command, quiet, progress_choice);
+
   try {
     std::vector<const char*> argv;
     for (const auto& arg : args) argv.push_back(arg.c_str());
@@ -326,6 +469,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     throw Error(ErrorCode::Usage, message + " (see 'terratiles" + command + " --help')");
   }
 
+  if (levels_command->parsed()) {
+    Progress progress(progressModeFor(progress_choice, quiet));
+    InterruptGuard interrupt_guard;
+    runLevelsCommand(levels, progress, quiet, err);
+    return 0;
+  }
   if (tin_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;

@@ -1,0 +1,86 @@
+#pragma once
+// buildLevels: the cluster LoD loop (DESIGN.md 2 step 3; paper sections 3.3-3.4, 4, 5.3.1).
+//
+// Level 0 is the finest TIN. Each coarser level is made from the one before it: partition
+// its triangles into clusters (METIS on the face dual graph, or random growth for
+// experiments), lock every cluster border, the outer border and the feature constraints,
+// simplify inside every cluster (CGAL edge collapse, in parallel) to about `level_ratio` of
+// its edges or until the next collapse would exceed the level's error budget, and merge the
+// clusters by index. Re-partitioning every level moves the locked borders, so no border
+// stays locked for ever (paper figs 4, 42, 43); `repartition = false` keeps the first
+// partition's borders instead, for comparison.
+//
+// Every level's vertical error is measured against the DEM on every pixel (measureTin), and
+// after every level the loop checks (paper algorithm 2) that every constrained edge still
+// exists; a lost constraint is an Error(Internal), never silently accepted.
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "src/base/progress.h"
+#include "src/dem/dem_grid.h"
+#include "src/partition/partition_faces.h"
+#include "src/tin/measure_tin.h"
+#include "src/tin/tin_mesh.h"
+
+namespace terratiles {
+
+struct LevelOptions {
+  Partitioner partitioner = Partitioner::Metis;
+  // Clusters per level: ceil(triangles / cluster_triangles) (paper 3.5 sizes them from the
+  // tiles of the zoom: about four per tile; the tiling stage passes clusters_per_level).
+  std::int32_t cluster_triangles = 2048;
+  // When not empty, clusters_per_level[l] clusters split level l (instead of the above).
+  std::vector<std::int32_t> clusters_per_level;
+  // Target edge ratio of one simplification (paper: 0.5).
+  double level_ratio = 0.5;
+  // Error budget of level l (l >= 1): first_budget_m * level_error_growth^(l - 1); 0 or
+  // infinity: no budget (the ratio alone decides).
+  double first_budget_m = 0;
+  double level_error_growth = 2;
+  // Levels to build after the finest. 0: until a simplification keeps more than
+  // level_ratio + 0.1 of the edges without being held back by the budget (or, held back,
+  // keeps more than 90 % of the triangles): that level is dropped, since locked edges (outer
+  // border, constraints) dominate it; or after the level simplified as one cluster.
+  std::int32_t coarser_levels = 0;
+  std::uint32_t seed = 1;
+  // false: fixed borders, the scheme the paper compares against (fig 42): the finest level's
+  // partition is kept at every level (each simplified triangle stays in its cluster).
+  bool repartition = true;
+};
+
+struct Level {
+  TinMesh mesh;
+  // The partition that split this level to build the next coarser one (empty on the
+  // coarsest level).
+  FacePartition partition;
+  // Per vertex of this level: its index in the next coarser level, or kRemovedVertex.
+  std::vector<std::uint32_t> index_in_coarser;
+  TinErrorStatistics error;  // measured against the DEM
+  std::size_t edge_count = 0;
+  double budget_m = 0;  // the error budget this level was simplified under (0: none)
+  std::size_t refused_for_error = 0, refused_for_flip = 0;
+};
+
+// Ground metres per grid unit along columns and rows: the pixel size for a projected CRS in
+// metres (or other linear units, converted), for a geographic CRS the pixel size in degrees
+// times the metres per degree at the DEM's centre latitude (WGS84).
+std::array<double, 2> groundMetresPerPixel(const DemGrid& dem);
+
+// The undirected edges of a mesh, as sorted (low << 32 | high) keys.
+std::vector<std::uint64_t> meshEdgeKeys(const TinMesh& mesh);
+
+// Feature constraints as the paper made them (4.2): `count` random connected sets of up to
+// `set_faces` triangles (grown breadth-first from random seed triangles), every edge of them
+// locked. Deterministic for a seed.
+std::vector<std::array<std::uint32_t, 2>> randomFaceSetConstraints(const TinMesh& mesh, std::size_t count,
+                                                                   std::size_t set_faces, std::uint32_t seed);
+
+// finest: level 0, in the DEM's grid frame. constraints: locked edges of level 0 as vertex
+// pairs (kept at every level). Throws Error(Input) for a non-manifold TIN, Error(Usage) for
+// options out of range, Error(Internal) if a constraint is lost.
+std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOptions& options,
+                               std::vector<std::array<std::uint32_t, 2>> constraints, Progress& progress);
+
+}  // namespace terratiles

@@ -1,0 +1,53 @@
+// `terratiles levels`: a real raster to its cluster levels of detail, each level read back
+// from its file within the budget it reports, levels.json agreeing with the files.
+#include <doctest/doctest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+
+#include "formats/dem/read_dem.h"
+#include "formats/tin/tin_file.h"
+#include "src/tin/measure_tin.h"
+#include "tests/test_support.h"
+
+using namespace terratiles;
+
+TEST_SUITE("cli") {
+  TEST_CASE("levels writes the Interlaken levels with errors within their budgets") {
+    test::TempDir dir;
+    const std::string input = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+    const DemGrid dem = readDem({input});
+    const std::string output = dir / "levels";
+    const auto result = test::runTerratiles({"levels", input, "-o", output, "--random-constraints", "50"});
+    REQUIRE(result.exit_code == 0);
+    CHECK(result.err.find("levels to") != std::string::npos);
+    std::ifstream file(std::filesystem::path(output) / "levels.json");
+    const nlohmann::json summary = nlohmann::json::parse(file);
+    CHECK(summary["level_error_growth"] == 2.0);
+    CHECK(summary["constrained_edges"].get<int>() > 50);
+    const auto& levels = summary["levels"];
+    REQUIRE(levels.size() >= 5);
+    std::size_t previous_triangles = 0;
+    for (std::size_t l = 0; l < levels.size(); ++l) {
+      CAPTURE(l);
+      const TinMesh mesh = toGridTin(readTinFile((std::filesystem::path(output) / levels[l]["file"].get<std::string>()).string()),
+                                     dem.origin_x, dem.origin_y, dem.pixel_size_x);
+      CHECK(mesh.triangleCount() == levels[l]["triangles"].get<std::size_t>());
+      const TinErrorStatistics errors = measureTin(dem, mesh);
+      CHECK(errors.max_error_m == doctest::Approx(levels[l]["max_error_m"].get<double>()).epsilon(1e-6));
+      CHECK(errors.uncovered_valid_pixels == 0);
+      // Level l's budget is 0.5 m * 2^l (level 0: the TIN's own bound).
+      CHECK(errors.max_error_m <= 0.5 * std::pow(2.0, static_cast<double>(l)) + 1e-6);
+      if (l > 0) CHECK(mesh.triangleCount() < previous_triangles * 9 / 10);
+      previous_triangles = mesh.triangleCount();
+    }
+    // A second run needs --force; bad options are usage errors; nothing is left half-written.
+    CHECK(test::runTerratiles({"levels", input, "-o", output}).exit_code == 4);
+    CHECK(test::runTerratiles({"levels", input, "-o", output, "-f", "-q", "--levels", "2"}).exit_code == 0);
+    CHECK(test::runTerratiles({"levels", input, "-o", dir / "x", "--level-ratio", "1.5"}).exit_code == 2);
+    CHECK(test::runTerratiles({"levels", input, "-o", dir / "y", "--partitioner", "kway"}).exit_code == 2);
+    CHECK_FALSE(std::filesystem::exists(dir.path() / "x"));
+  }
+}
