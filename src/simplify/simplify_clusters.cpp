@@ -19,6 +19,7 @@
 #include <utility>
 
 #include "src/base/error.h"
+#include "src/tin/measure_tin.h"
 
 namespace terratiles {
 namespace detail {
@@ -153,27 +154,13 @@ bool isUpwardTriangle(const GridPoint& a, const GridPoint& b, const GridPoint& c
 // pixel inclusion and interpolation as measureTin, so measureTin confirms the budget.
 bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                    double budget_m) {
-  const double area2 = signedArea2(a, b, c);
-  if (area2 == 0) return false;
-  const double eps = 1e-9 * std::fabs(area2);
-  const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
-  const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
-  const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
-  const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
-  for (int row = min_row; row <= max_row; ++row) {
-    for (int col = min_col; col <= max_col; ++col) {
-      const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
-      const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
-      const double wc = 1.0 - wa - wb;
-      if (wa * std::fabs(area2) < -eps || wb * std::fabs(area2) < -eps || wc * std::fabs(area2) < -eps) {
-        continue;
-      }
-      const float h = dem.heights_m[dem.index(col, row)];
-      if (std::isnan(h)) continue;
-      if (std::fabs(wa * a.height_m + wb * b.height_m + wc * c.height_m - h) > budget_m) return true;
-    }
-  }
-  return false;
+  bool exceeds = false;
+  forEachCoveredPixel(dem, a, b, c, [&](std::size_t i, double surface_m) {
+    const float h = dem.heights_m[i];
+    exceeds = !std::isnan(h) && std::fabs(surface_m - h) > budget_m;
+    return !exceeds;
+  });
+  return exceeds;
 }
 
 // ---------------------------------------------------------------------------------------------

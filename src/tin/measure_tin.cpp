@@ -20,37 +20,22 @@ TinErrorStatistics measureTin(const DemGrid& dem, const TinMesh& mesh) {
       ++stats.degenerate_triangles;
       continue;
     }
-    // Barycentric weights of the pixel centre (col, row); inside when all are >= -eps.
-    const double eps = 1e-9 * std::fabs(area2);
-    const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
-    const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
-    const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
-    const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
-    for (int row = min_row; row <= max_row; ++row) {
-      for (int col = min_col; col <= max_col; ++col) {
-        const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
-        const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
-        const double wc = 1.0 - wa - wb;
-        if (wa * std::fabs(area2) < -eps || wb * std::fabs(area2) < -eps ||
-            wc * std::fabs(area2) < -eps) {
-          continue;
-        }
-        const std::size_t i = dem.index(col, row);
-        const float h = dem.heights_m[i];
-        if (std::isnan(h)) {
-          if (!(covered[i] & 2)) ++stats.covered_nodata_pixels;
-          covered[i] |= 2;
-          continue;
-        }
-        const double error = std::fabs(wa * a.height_m + wb * b.height_m + wc * c.height_m - h);
-        stats.max_error_m = std::max(stats.max_error_m, error);
-        if (!(covered[i] & 1)) {
-          covered[i] |= 1;
-          sum_squares += error * error;
-          ++stats.measured_pixels;
-        }
+    forEachCoveredPixel(dem, a, b, c, [&](std::size_t i, double surface_m) {
+      const float h = dem.heights_m[i];
+      if (std::isnan(h)) {
+        if (!(covered[i] & 2)) ++stats.covered_nodata_pixels;
+        covered[i] |= 2;
+        return true;
       }
-    }
+      const double error = std::fabs(surface_m - h);
+      stats.max_error_m = std::max(stats.max_error_m, error);
+      if (!(covered[i] & 1)) {
+        covered[i] |= 1;
+        sum_squares += error * error;
+        ++stats.measured_pixels;
+      }
+      return true;
+    });
   }
   for (std::size_t i = 0; i < covered.size(); ++i) {
     if (!(covered[i] & 1) && !std::isnan(dem.heights_m[i])) ++stats.uncovered_valid_pixels;
