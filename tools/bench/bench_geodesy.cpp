@@ -12,26 +12,14 @@
 #include <numbers>
 #include <vector>
 
+#include "tools/bench/bench_support.h"
 #include "src/geo/crs_transform.h"
 #include "src/geo/swiss_lv95.h"
 
 using namespace terratiles;
 
-namespace {
-
-double median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return values[values.size() / 2];
-}
-
-template <typename Function>
-double secondsOf(Function&& function) {
-  const auto start = std::chrono::steady_clock::now();
-  function();
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
+using bench::median;
+using bench::secondsOf;
 
 int main(int argc, char** argv) {
   const std::size_t count = argc > 1 ? std::strtoull(argv[1], nullptr, 10) : 10'000'000;

@@ -52,6 +52,7 @@
 #include <vector>
 
 #include "formats/dem/read_dem.h"
+#include "tools/bench/bench_support.h"
 #include "src/base/error.h"
 #include "src/base/progress.h"
 #include "src/dem/dem_grid.h"
@@ -67,6 +68,10 @@ using namespace terratiles;
 namespace fs = std::filesystem;
 
 namespace {
+
+using bench::median;
+using bench::parseNumber;
+using bench::secondsOf;
 
 // Paper 3.4: every level keeps about half of the edges. Ours stops at this edge ratio,
 // meshoptimizer at this fraction of each cluster's indices.
@@ -88,16 +93,6 @@ constexpr const char* kUsage =
     "  --cluster-triangles  METIS clusters per level: ceil(triangles / this) (default 1024)\n"
     "  --runs               timed runs per step and level, after one untimed warm-up; the median\n"
     "                       is reported (default 3)\n";
-
-double parseNumber(const std::string& text, const std::string& option) {
-  double value = 0;
-  const char* end = text.data() + text.size();
-  const auto [next, ec] = std::from_chars(text.data(), end, value);
-  if (text.empty() || ec != std::errc() || next != end || !std::isfinite(value)) {
-    throw Error(ErrorCode::Usage, option + " expects a number, found '" + text + "'");
-  }
-  return value;
-}
 
 int parseCount(const std::string& text, const std::string& option, int min, int max) {
   const double value = parseNumber(text, option);
@@ -139,18 +134,6 @@ BenchOptions parseOptions(int argc, char** argv) {
   }
   if (options.rasters.empty()) throw Error(ErrorCode::Usage, "no RASTER given; usage: terratiles_bench_lod RASTER... (see --help)");
   return options;
-}
-
-double median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return values[values.size() / 2];
-}
-
-template <typename Function>
-double secondsOf(Function&& function) {
-  const auto start = std::chrono::steady_clock::now();
-  function();
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 constexpr std::uint32_t kNoLocal = 0xffffffff;
@@ -448,13 +431,5 @@ int runBench(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return runBench(argc, argv);
-  } catch (const Error& error) {
-    std::fprintf(stderr, "terratiles_bench_lod: error: %s\n", error.what());
-    return exitCodeFor(error.code());
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "terratiles_bench_lod: error: %s\n", error.what());
-    return 1;
-  }
+  return terratiles::bench::runProgram("terratiles_bench_lod", [&] { return runBench(argc, argv); });
 }

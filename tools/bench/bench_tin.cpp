@@ -41,6 +41,7 @@
 #include <tbb/global_control.h>
 
 #include "formats/dem/read_dem.h"
+#include "tools/bench/bench_support.h"
 #include "src/base/error.h"
 #include "src/base/progress.h"
 #include "src/dem/dem_grid.h"
@@ -54,6 +55,9 @@ using namespace terratiles;
 namespace fs = std::filesystem;
 
 namespace {
+
+using bench::median;
+using bench::parseNumber;
 
 static_assert(std::endian::native == std::endian::little,
               "the raw grid and Delatin's output file are little-endian");
@@ -80,16 +84,6 @@ constexpr const char* kUsage =
     "  --threads  threads our buildTin may use (default 1: Delatin is single-threaded)\n"
     "  --node     the node executable (default node, searched in PATH)\n"
     "  --script   tools/bench/delatin/run_delatin.mjs (default: next to this source file)\n";
-
-double parseNumber(const std::string& text, const char* option) {
-  double value = 0;
-  const char* end = text.data() + text.size();
-  const auto [next, ec] = std::from_chars(text.data(), end, value);
-  if (ec != std::errc() || next != end || !std::isfinite(value)) {
-    throw Error(ErrorCode::Usage, std::string(option) + " expects a number, found '" + text + "'");
-  }
-  return value;
-}
 
 BenchOptions parseOptions(int argc, char** argv) {
   BenchOptions options;
@@ -144,11 +138,6 @@ BenchOptions parseOptions(int argc, char** argv) {
                                       " does not exist; pass the path of tools/bench/delatin/run_delatin.mjs");
   }
   return options;
-}
-
-double median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return values[values.size() / 2];
 }
 
 // A scratch directory for the raw grid and Delatin's meshes, removed on every exit path.
@@ -415,13 +404,5 @@ int runBench(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return runBench(argc, argv);
-  } catch (const Error& error) {
-    std::fprintf(stderr, "terratiles_bench_tin: error: %s\n", error.what());
-    return exitCodeFor(error.code());
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "terratiles_bench_tin: error: %s\n", error.what());
-    return 1;
-  }
+  return terratiles::bench::runProgram("terratiles_bench_tin", [&] { return runBench(argc, argv); });
 }

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "formats/dem/read_dem.h"
+#include "tools/bench/bench_support.h"
 #include "src/base/error.h"
 #include "src/lod/build_levels.h"
 #include "src/partition/face_graph.h"
@@ -241,14 +242,5 @@ int runExperiments(int argc, char** argv) {
 }  // namespace terratiles
 
 int main(int argc, char** argv) {
-  using namespace terratiles;
-  try {
-    return runExperiments(argc, argv);
-  } catch (const Error& error) {
-    std::fprintf(stderr, "terratiles_lod_experiments: error: %s\n", error.what());
-    return exitCodeFor(error.code());
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "terratiles_lod_experiments: error: %s\n", error.what());
-    return 1;
-  }
+  return terratiles::bench::runProgram("terratiles_lod_experiments", [&] { return terratiles::runExperiments(argc, argv); });
 }
