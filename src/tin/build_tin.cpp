@@ -464,6 +464,20 @@ class GreedyInsertion {
     double best_error = -1;
     Pixel best{a.x, a.y};
     const float* heights = dem_.heights_m.data();
+    // With nodata, pixel by pixel: note nodata, skip the vertices (valid or virtual), keep the
+    // first largest error in row-major order.
+    const auto considerWithNodata = [&](std::int32_t x, std::int32_t y, float h, double row_z) {
+      if (std::isnan(h)) {
+        covers_nodata = true;
+        return;
+      }
+      if ((x == a.x && y == a.y) || (x == b.x && y == b.y) || (x == c.x && y == c.y)) return;
+      const double error = std::fabs(gx * static_cast<double>(x) + row_z - h);
+      if (error > best_error) {
+        best_error = error;
+        best = {x, y};
+      }
+    };
     // Per edge: alpha and beta(y) = beta_at_0 + beta_step * y; the span bound -beta / alpha is
     // estimated in floating point and then corrected with exact integer tests (an int64
     // division per edge and row cost more than the pixels of a small triangle).
@@ -518,18 +532,7 @@ class GreedyInsertion {
           }
         } else {
           for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
-            if ((w0 | w1 | w2) < 0) continue;  // outside: some edge function is negative
-            const float h = row[x];
-            if (std::isnan(h)) {
-              covers_nodata = true;
-              continue;
-            }
-            if ((x == a.x && y == a.y) || (x == b.x && y == b.y) || (x == c.x && y == c.y)) continue;
-            const double error = std::fabs(gx * static_cast<double>(x) + row_z - h);
-            if (error > best_error) {
-              best_error = error;
-              best = {x, y};
-            }
+            if ((w0 | w1 | w2) >= 0) considerWithNodata(x, y, row[x], row_z);  // inside the triangle
           }
         }
         for (int k = 0; k < 3; ++k) w_row[k] += beta_step[k];
@@ -572,20 +575,7 @@ class GreedyInsertion {
       const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
       const double row_z = gy * y + z0;
       if (has_nodata_) {
-        // Scalar: skip nodata (noting it) and the vertices, which are always valid or virtual.
-        for (std::int64_t x = x0; x <= x1; ++x) {
-          const float h = row[x];
-          if (std::isnan(h)) {
-            covers_nodata = true;
-            continue;
-          }
-          if ((x == a.x && y == a.y) || (x == b.x && y == b.y) || (x == c.x && y == c.y)) continue;
-          const double error = std::fabs(gx * static_cast<double>(x) + row_z - h);
-          if (error > best_error) {
-            best_error = error;
-            best = {static_cast<std::int32_t>(x), y};
-          }
-        }
+        for (std::int64_t x = x0; x <= x1; ++x) considerWithNodata(static_cast<std::int32_t>(x), y, row[x], row_z);
         continue;
       }
       // First the row's largest error (vectorised), then its position only if it wins.
