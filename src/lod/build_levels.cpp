@@ -112,7 +112,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     Level& level = levels[l];
     progress.beginStage("level " + std::to_string(l) + ": measuring", 0);
     level.error = measureTin(dem, level.mesh);
-    level.edge_count = meshEdgeKeys(level.mesh).size();
+    if (l == 0) level.edge_count = meshEdgeKeys(level.mesh).size();  // coarser levels: counted below
     progress.endStage();
     const std::size_t triangles = level.mesh.triangleCount();
     if (options.coarser_levels > 0 && l >= static_cast<std::size_t>(options.coarser_levels)) break;
@@ -173,6 +173,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     }
     level.index_in_coarser = std::move(simplified.new_index_of_vertex);
     next.mesh = std::move(simplified.mesh);
+    next.edge_count = edges.size();
     inherited = {std::move(simplified.cluster_of_face), level.partition.cluster_count};
     next.refused_for_error = simplified.refused_for_error;
     next.refused_for_flip = simplified.refused_for_flip;
