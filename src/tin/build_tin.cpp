@@ -53,53 +53,80 @@ __attribute__((target("avx2"))) double rowMaxErrorAvx2(const float* row, std::in
 }
 const bool kHasAvx2 = __builtin_cpu_supports("avx2");
 
-// The largest |gx * x + row_z - row[x]| over x in [x0, x1] where the three edge functions
-// w_k + (x - x0) * alpha_k are all >= 0, or -1 when there is none. The edge functions are
-// integers below 2^40 here, exact in doubles.
-__attribute__((target("avx2"))) double rowMaxErrorInsideAvx2(const float* row, std::int32_t x0, std::int32_t x1,
-                                                             double gx, double row_z, std::int64_t w0,
-                                                             std::int64_t w1, std::int64_t w2,
-                                                             const std::int64_t alpha[3]) {
+// The worst pixel of a narrow triangle: over the box [x_first, x_last] x [y_first, y_last]
+// of a raster `width` pixels wide, the pixel inside the triangle (its three edge functions
+// w_k = alpha_k * x + beta_step_k * y + c_k all >= 0; w_first holds them at (x_first,
+// y_first)) with the largest |gx * x + (gy * y + z0) - h|, the first in row-major order on
+// ties. Four pixels per step; each lane keeps its own best value and its first position,
+// then the lanes are reduced (largest value, smallest position), which is the scalar
+// scan's answer. Edge functions are integers below 2^40 here, exact in doubles. Returns
+// false when no pixel of the box is inside.
+__attribute__((target("avx2"))) bool boxWorstPixelInsideAvx2(const float* heights, std::int32_t width,
+                                                            std::int32_t x_first, std::int32_t x_last,
+                                                            std::int32_t y_first, std::int32_t y_last, double gx,
+                                                            double gy, double z0, const std::int64_t w_first[3],
+                                                            const std::int64_t alpha[3],
+                                                            const std::int64_t beta_step[3], double* worst_error,
+                                                            std::int32_t* worst_x, std::int32_t* worst_y) {
   const __m256d sign = _mm256_set1_pd(-0.0), zero = _mm256_setzero_pd(), outside = _mm256_set1_pd(-1.0);
-  const __m256d vgx = _mm256_set1_pd(gx), vrow_z = _mm256_set1_pd(row_z), four = _mm256_set1_pd(4.0);
+  const __m256d vgx = _mm256_set1_pd(gx), four = _mm256_set1_pd(4.0);
   const __m256d lane = _mm256_set_pd(3, 2, 1, 0);
-  __m256d vw0 = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w0)),
-                              _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[0]))));
-  __m256d vw1 = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w1)),
-                              _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[1]))));
-  __m256d vw2 = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w2)),
-                              _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[2]))));
-  const __m256d step0 = _mm256_set1_pd(4.0 * static_cast<double>(alpha[0]));
-  const __m256d step1 = _mm256_set1_pd(4.0 * static_cast<double>(alpha[1]));
-  const __m256d step2 = _mm256_set1_pd(4.0 * static_cast<double>(alpha[2]));
-  const double first = static_cast<double>(x0);
-  __m256d vx = _mm256_set_pd(first + 3, first + 2, first + 1, first);
-  __m256d vmax = outside;
-  std::int32_t x = x0;
-  for (; x + 3 <= x1; x += 4) {
-    const __m256d h = _mm256_cvtps_pd(_mm_loadu_ps(row + x));
-    const __m256d z = _mm256_add_pd(_mm256_mul_pd(vgx, vx), vrow_z);
-    const __m256d error = _mm256_andnot_pd(sign, _mm256_sub_pd(z, h));
-    const __m256d inside = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(vw0, zero, _CMP_GE_OQ),
-                                                       _mm256_cmp_pd(vw1, zero, _CMP_GE_OQ)),
-                                         _mm256_cmp_pd(vw2, zero, _CMP_GE_OQ));
-    vmax = _mm256_max_pd(vmax, _mm256_blendv_pd(outside, error, inside));
-    vx = _mm256_add_pd(vx, four);
-    vw0 = _mm256_add_pd(vw0, step0);
-    vw1 = _mm256_add_pd(vw1, step1);
-    vw2 = _mm256_add_pd(vw2, step2);
+  const __m256d last_x = _mm256_set1_pd(static_cast<double>(x_last));
+  __m256d step[3], row_start[3];
+  for (int k = 0; k < 3; ++k) {
+    step[k] = _mm256_set1_pd(4.0 * static_cast<double>(alpha[k]));
+    row_start[k] = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w_first[k])),
+                                 _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[k]))));
   }
-  const __m128d half = _mm_max_pd(_mm256_castpd256_pd128(vmax), _mm256_extractf128_pd(vmax, 1));
-  double row_max = std::max(_mm_cvtsd_f64(half), _mm_cvtsd_f64(_mm_unpackhi_pd(half, half)));
-  const std::int64_t done = x - x0;
-  w0 += done * alpha[0];
-  w1 += done * alpha[1];
-  w2 += done * alpha[2];
-  for (; x <= x1; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
-    if ((w0 | w1 | w2) < 0) continue;
-    row_max = std::max(row_max, std::fabs(gx * static_cast<double>(x) + row_z - row[x]));
+  const __m256d first_x = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(x_first)), lane);
+  __m256d best = outside, best_position = zero;
+  for (std::int32_t y = y_first; y <= y_last; ++y) {
+    const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width);
+    const __m256d row_z = _mm256_set1_pd(gy * y + z0);
+    const __m256d row_position = _mm256_set1_pd(static_cast<double>(y) * width);
+    __m256d vx = first_x, w0 = row_start[0], w1 = row_start[1], w2 = row_start[2];
+    for (std::int32_t x = x_first; x <= x_last; x += 4) {
+      // The last step of a row may reach past the box (and, on the raster's last row, past
+      // its end): those lanes are not loaded and not inside.
+      const __m128 h4 = x + 3 <= x_last
+                            ? _mm_loadu_ps(row + x)
+                            : _mm_maskload_ps(row + x, _mm256_castsi256_si128(_mm256_castpd_si256(
+                                                           _mm256_cmp_pd(vx, last_x, _CMP_LE_OQ))));
+      const __m256d h = _mm256_cvtps_pd(h4);
+      const __m256d z = _mm256_add_pd(_mm256_mul_pd(vgx, vx), row_z);
+      const __m256d error = _mm256_andnot_pd(sign, _mm256_sub_pd(z, h));
+      const __m256d inside = _mm256_and_pd(
+          _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(w0, zero, _CMP_GE_OQ), _mm256_cmp_pd(w1, zero, _CMP_GE_OQ)),
+                        _mm256_cmp_pd(w2, zero, _CMP_GE_OQ)),
+          _mm256_cmp_pd(vx, last_x, _CMP_LE_OQ));
+      const __m256d better = _mm256_and_pd(inside, _mm256_cmp_pd(error, best, _CMP_GT_OQ));
+      best = _mm256_blendv_pd(best, error, better);
+      best_position = _mm256_blendv_pd(best_position, _mm256_add_pd(row_position, vx), better);
+      vx = _mm256_add_pd(vx, four);
+      w0 = _mm256_add_pd(w0, step[0]);
+      w1 = _mm256_add_pd(w1, step[1]);
+      w2 = _mm256_add_pd(w2, step[2]);
+    }
+    for (int k = 0; k < 3; ++k) {
+      row_start[k] = _mm256_add_pd(row_start[k], _mm256_set1_pd(static_cast<double>(beta_step[k])));
+    }
   }
-  return row_max;
+  alignas(32) double lane_best[4], lane_position[4];
+  _mm256_store_pd(lane_best, best);
+  _mm256_store_pd(lane_position, best_position);
+  int winner = 0;
+  for (int i = 1; i < 4; ++i) {
+    if (lane_best[i] > lane_best[winner] ||
+        (lane_best[i] == lane_best[winner] && lane_position[i] < lane_position[winner])) {
+      winner = i;
+    }
+  }
+  if (lane_best[winner] < 0) return false;
+  const auto position = static_cast<std::int64_t>(lane_position[winner]);
+  *worst_error = lane_best[winner];
+  *worst_y = static_cast<std::int32_t>(position / width);
+  *worst_x = static_cast<std::int32_t>(position % width);
+  return true;
 }
 #endif
 
@@ -500,26 +527,19 @@ class GreedyInsertion {
       }
       std::int64_t w_row[3];
       for (int k = 0; k < 3; ++k) w_row[k] = alpha[k] * x_first + beta_step[k] * y_first + beta_at_0[k];
-      for (std::int32_t y = y_first; y <= y_last; ++y) {
+#if defined(__x86_64__)
+      const bool vectorised = !has_nodata_ && kHasAvx2;
+      if (vectorised && x_first <= x_last) {
+        boxWorstPixelInsideAvx2(heights, width_, x_first, x_last, y_first, y_last, gx, gy, z0, w_row, alpha,
+                                beta_step, &best_error, &best.x, &best.y);
+      }
+#else
+      const bool vectorised = false;
+#endif
+      for (std::int32_t y = y_first; y <= y_last && !vectorised; ++y) {
         const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
         const double row_z = gy * y + z0;
         std::int64_t w0 = w_row[0], w1 = w_row[1], w2 = w_row[2];
-#if defined(__x86_64__)
-        if (!has_nodata_ && kHasAvx2) {
-          // The row's largest error inside the triangle four pixels at a time, then its
-          // position only if it wins (same expression, so equality finds it).
-          const double row_max = rowMaxErrorInsideAvx2(row, x_first, x_last, gx, row_z, w0, w1, w2, alpha);
-          if (row_max > best_error) {
-            for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
-              if ((w0 | w1 | w2) >= 0 && std::fabs(gx * static_cast<double>(x) + row_z - row[x]) == row_max) {
-                best_error = row_max;
-                best = {x, y};
-                break;
-              }
-            }
-          }
-        } else
-#endif
         if (!has_nodata_) {
           // Branch-free: a pixel outside (some edge function negative) scores -1.
           for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
