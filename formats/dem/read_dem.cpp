@@ -11,31 +11,11 @@
 #include <memory>
 #include <sstream>
 
+#include "formats/gdal_support.h"
 #include "src/base/error.h"
 
 namespace terratiles {
 namespace {
-
-// GDAL reports errors through a global handler; collect the last message quietly and put
-// it into our own one-line error instead of letting GDAL print to stderr.
-class GdalErrorCapture {
- public:
-  GdalErrorCapture() {
-    CPLPushErrorHandler(CPLQuietErrorHandler);
-    CPLErrorReset();
-  }
-  ~GdalErrorCapture() { CPLPopErrorHandler(); }
-  std::string lastMessage() const {
-    std::string message = CPLGetLastErrorMsg();
-    std::replace(message.begin(), message.end(), '\n', ' ');
-    return message;
-  }
-};
-
-struct GdalDatasetCloser {
-  void operator()(GDALDataset* dataset) const { GDALClose(dataset); }
-};
-using DatasetPtr = std::unique_ptr<GDALDataset, GdalDatasetCloser>;
 
 std::string format(double value) {
   std::ostringstream out;

@@ -1,10 +1,13 @@
 #include "src/tin/build_tin.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <deque>
 #include <limits>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include <tbb/parallel_for.h>
@@ -207,7 +210,23 @@ struct Window {
 struct WindowMesh {
   std::vector<Pixel> pixels;
   std::vector<std::uint32_t> triangle_indices;  // counter-clockwise seen from above
+  std::vector<std::array<std::uint32_t, 2>> constrained_edges;  // indices into pixels
+  std::size_t constrained_edges_dropped = 0;
+  std::size_t segments_bent = 0;
+  std::size_t segments_bent_to_end = 0;
 };
+
+// A constraint segment in a window: two pixels.
+struct WindowSegment {
+  Pixel from, to;
+};
+
+inline std::uint64_t edgeKey(std::int32_t a, std::int32_t b) {
+  const auto low = static_cast<std::uint32_t>(std::min(a, b)), high = static_cast<std::uint32_t>(std::max(a, b));
+  return (static_cast<std::uint64_t>(low) << 32) | high;
+}
+
+inline int sign(std::int64_t value) { return (value > 0) - (value < 0); }
 
 GridPoint gridPoint(const DemGrid& dem, Pixel p) {
   return {static_cast<double>(p.x), static_cast<double>(p.y), static_cast<double>(dem.heightAt(p.x, p.y))};
@@ -239,7 +258,11 @@ class GreedyInsertion {
   // fixed_border: the pixels of the window's outline inserted before any error-driven
   // insertion (the shared border polylines of a windowed build); with it, the outline is
   // final. Without it (one window over the whole grid), the outline is refined like the rest.
-  void run(Progress* progress, const std::vector<Pixel>* fixed_border = nullptr) {
+  // segments: break lines inserted as constrained edges after the outline, before any
+  // error-driven insertion; each lies in the window's closed box, and its pixels on the
+  // window's outline are among fixed_border's (or corners).
+  void run(Progress* progress, const std::vector<Pixel>* fixed_border = nullptr,
+           const std::vector<WindowSegment>* segments = nullptr) {
     const Pixel corners[4] = {{window_.x0, window_.y0}, {window_.x1, window_.y0},
                               {window_.x0, window_.y1}, {window_.x1, window_.y1}};
     for (const Pixel& corner : corners) addVertex(corner);
@@ -251,6 +274,17 @@ class GreedyInsertion {
     if (fixed_border) {
       border_fixed_ = true;
       for (const Pixel& p : *fixed_border) insertBorderVertex(p);
+    }
+    if (segments && !segments->empty()) {
+      tracking_ = true;
+      bend_budget_ = 8 * segments->size() + 64;
+      vertex_edge_.assign(coords_.size(), kNone);
+      for (std::int32_t t = 0; t < static_cast<std::int32_t>(triangles_.size() / 3); ++t) noteCorners(t);
+      for (const WindowSegment& segment : *segments) {
+        const std::int32_t u = insertConstraintVertex(segment.from);
+        const std::int32_t v = insertConstraintVertex(segment.to);
+        insertSegment(u, v, 0);
+      }
     }
     flushPending();
 
@@ -304,6 +338,26 @@ class GreedyInsertion {
     }
     out.pixels.shrink_to_fit();
     out.triangle_indices.shrink_to_fit();
+    // Constrained edges that are still edges of a kept triangle, in a fixed order.
+    std::vector<std::uint64_t> keys(constrained_.begin(), constrained_.end());
+    std::sort(keys.begin(), keys.end());
+    for (const std::uint64_t key : keys) {
+      const auto u = static_cast<std::int32_t>(key >> 32), v = static_cast<std::int32_t>(key & 0xffffffffu);
+      std::int32_t e = findHalfedge(u, v);
+      if (e == kNone) e = findHalfedge(v, u);
+      TERRATILES_ASSERT(e != kNone);
+      const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+      const bool kept = !dropped_[static_cast<std::size_t>(e / 3)] ||
+                        (twin != kNone && !dropped_[static_cast<std::size_t>(twin / 3)]);
+      if (!kept) {
+        ++out.constrained_edges_dropped;
+        continue;
+      }
+      out.constrained_edges.push_back({output_index[static_cast<std::size_t>(u)], output_index[static_cast<std::size_t>(v)]});
+    }
+    out.segments_bent = segments_bent_;
+    out.segments_bent_to_end = segments_bent_far_;
+    out.constrained_edges_dropped += segments_dropped_;
     return out;
   }
 
@@ -312,6 +366,7 @@ class GreedyInsertion {
   // triangles are refined like mixed ones and dropped at the end.
   std::int32_t addVertex(Pixel p) {
     coords_.push_back(p);
+    if (tracking_) vertex_edge_.push_back(kNone);
     const float h = dem_.heightAt(p.x, p.y);
     vertex_virtual_.push_back(std::isnan(h) ? 1 : 0);
     vertex_height_.push_back(std::isnan(h) ? virtual_height_ : static_cast<double>(h));
@@ -332,6 +387,7 @@ class GreedyInsertion {
     link(3 * t + 1, bc);
     link(3 * t + 2, ca);
     markPending(t);
+    if (tracking_) noteCorners(t);
     return t;
   }
 
@@ -345,6 +401,15 @@ class GreedyInsertion {
     link(3 * t + 1, bc);
     link(3 * t + 2, ca);
     markPending(t);
+    if (tracking_) noteCorners(t);
+  }
+
+  // With constraints: every vertex knows one halfedge leaving it (kept up to date by every
+  // change of a triangle: its three corners are noted again).
+  void noteCorners(std::int32_t t) {
+    for (std::int32_t e = 3 * t; e < 3 * t + 3; ++e) {
+      vertex_edge_[static_cast<std::size_t>(triangles_[static_cast<std::size_t>(e)])] = e;
+    }
   }
 
   void link(std::int32_t a, std::int32_t b) {
@@ -402,6 +467,10 @@ class GreedyInsertion {
     const std::int32_t h_bc = halfedges_[static_cast<std::size_t>(en)];
     const std::int32_t h_ca = halfedges_[static_cast<std::size_t>(ep)];
     const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+    if (!constrained_.empty() && constrained_.erase(edgeKey(a, b)) > 0) {
+      constrained_.insert(edgeKey(a, pv));
+      constrained_.insert(edgeKey(pv, b));
+    }
     if (twin == kNone) {
       // Hull edge: t becomes (a, p, c) and new (p, b, c).
       setTriangle(t, a, pv, c, kNone, kNone, h_ca);
@@ -431,19 +500,31 @@ class GreedyInsertion {
   void legalize(std::int32_t a) {
     const std::int32_t b = halfedges_[static_cast<std::size_t>(a)];
     if (b == kNone) return;
-    const std::int32_t an = nextHalfedge(a), ap = prevHalfedge(a);
-    const std::int32_t bn = nextHalfedge(b), bp = prevHalfedge(b);
+    if (!constrained_.empty() && isConstrained(a)) return;
     const std::int32_t P = triangles_[static_cast<std::size_t>(a)];
-    const std::int32_t Q = triangles_[static_cast<std::size_t>(an)];
-    const std::int32_t L = triangles_[static_cast<std::size_t>(ap)];
-    const std::int32_t R = triangles_[static_cast<std::size_t>(bp)];
+    const std::int32_t Q = triangles_[static_cast<std::size_t>(nextHalfedge(a))];
+    const std::int32_t L = triangles_[static_cast<std::size_t>(prevHalfedge(a))];
+    const std::int32_t R = triangles_[static_cast<std::size_t>(prevHalfedge(b))];
     if (!inCircle(coords_[static_cast<std::size_t>(P)], coords_[static_cast<std::size_t>(Q)],
                   coords_[static_cast<std::size_t>(L)], coords_[static_cast<std::size_t>(R)])) {
       return;
     }
+    flipEdge(a);
+    legalize(a);
+    legalize(prevHalfedge(b));
+  }
+
+  // Flips the diagonal of the quad around halfedge a (P -> Q, opposite L) and its twin b
+  // (opposite R): (P, Q, L) and (Q, P, R) become (P, R, L) and (Q, L, R); a runs P -> R and
+  // next(a) is the new diagonal R -> L.
+  void flipEdge(std::int32_t a) {
+    const std::int32_t b = halfedges_[static_cast<std::size_t>(a)];
+    const std::int32_t an = nextHalfedge(a), ap = prevHalfedge(a);
+    const std::int32_t bn = nextHalfedge(b), bp = prevHalfedge(b);
+    const std::int32_t L = triangles_[static_cast<std::size_t>(ap)];
+    const std::int32_t R = triangles_[static_cast<std::size_t>(bp)];
     const std::int32_t h_pr = halfedges_[static_cast<std::size_t>(bn)];
     const std::int32_t h_ql = halfedges_[static_cast<std::size_t>(an)];
-    // (P, Q, L) and (Q, P, R) become (P, R, L) and (Q, L, R).
     triangles_[static_cast<std::size_t>(an)] = R;
     triangles_[static_cast<std::size_t>(bn)] = L;
     link(a, h_pr);
@@ -451,8 +532,240 @@ class GreedyInsertion {
     link(an, bn);
     markPending(a / 3);
     markPending(b / 3);
-    legalize(a);
-    legalize(bp);
+    if (tracking_) {
+      noteCorners(a / 3);
+      noteCorners(b / 3);
+    }
+  }
+
+  // ---- break lines (constrained edges) ----
+
+  bool isConstrained(std::int32_t e) const {
+    return constrained_.count(edgeKey(triangles_[static_cast<std::size_t>(e)],
+                                      triangles_[static_cast<std::size_t>(nextHalfedge(e))])) > 0;
+  }
+
+  // Calls visit(e) for the halfedges leaving vertex v (one per triangle around it) until it
+  // returns true; returns whether one did.
+  template <typename Visit>
+  bool forEachOutgoing(std::int32_t v, Visit visit) const {
+    const std::int32_t start = vertex_edge_[static_cast<std::size_t>(v)];
+    TERRATILES_ASSERT(start != kNone);
+    std::int32_t e = start;
+    do {
+      if (visit(e)) return true;
+      e = halfedges_[static_cast<std::size_t>(prevHalfedge(e))];  // counter-clockwise
+    } while (e != kNone && e != start);
+    if (e == start) return false;
+    // v is on the hull: the other way round from the start.
+    e = start;
+    while (true) {
+      const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+      if (twin == kNone) return false;
+      e = nextHalfedge(twin);
+      if (visit(e)) return true;
+    }
+  }
+
+  // The halfedge from u to v, or kNone (no such edge, or only v -> u on the hull).
+  std::int32_t findHalfedge(std::int32_t u, std::int32_t v) const {
+    std::int32_t found = kNone;
+    forEachOutgoing(u, [&](std::int32_t e) {
+      if (triangles_[static_cast<std::size_t>(nextHalfedge(e))] != v) return false;
+      found = e;
+      return true;
+    });
+    return found;
+  }
+
+  // The triangle containing p (inside or on its boundary), by a walk from the last one found;
+  // the first edge tried turns with every step, so the walk cannot cycle for long.
+  std::int32_t locate(Pixel p) {
+    std::int32_t t = last_located_ < static_cast<std::int32_t>(triangles_.size() / 3) ? last_located_ : 0;
+    const std::size_t limit = 4 * triangles_.size() + 64;
+    for (std::size_t step = 0; step < limit; ++step) {
+      bool moved = false;
+      for (std::int32_t i = 0; i < 3 && !moved; ++i) {
+        const std::int32_t e = 3 * t + static_cast<std::int32_t>((step + static_cast<std::size_t>(i)) % 3);
+        if (orient(vertex(e), vertex(nextHalfedge(e)), p) >= 0) continue;
+        const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+        TERRATILES_ASSERT(twin != kNone);  // p lies in the window
+        t = twin / 3;
+        moved = true;
+      }
+      if (!moved) {
+        last_located_ = t;
+        return t;
+      }
+    }
+    TERRATILES_ASSERT(false);
+    return kNone;
+  }
+
+  // The vertex at pixel p, inserted if it is not one yet.
+  std::int32_t insertConstraintVertex(Pixel p) {
+    const std::int32_t t = locate(p);
+    for (std::int32_t e = 3 * t; e < 3 * t + 3; ++e) {
+      const Pixel corner = vertex(e);
+      if (corner.x == p.x && corner.y == p.y) return triangles_[static_cast<std::size_t>(e)];
+    }
+    insert(p, t);
+    return static_cast<std::int32_t>(coords_.size()) - 1;
+  }
+
+  // Where segment u - v crosses the constrained edge a - b away from a vertex: the pixel
+  // nearest the crossing (of the four around it, the nearest valid one that may take a
+  // vertex: not a new one on a fixed outline), made a vertex, with a - b's constraint
+  // dropped so the caller can run it through the vertex; kNone when no pixel qualifies.
+  std::int32_t crossingVertex(std::int32_t u, std::int32_t v, std::int32_t a, std::int32_t b) {
+    const Pixel pu = coords_[static_cast<std::size_t>(u)], pv = coords_[static_cast<std::size_t>(v)];
+    const Pixel pa = coords_[static_cast<std::size_t>(a)], pb = coords_[static_cast<std::size_t>(b)];
+    const double su = static_cast<double>(orient(pa, pb, pu)), sv = static_cast<double>(orient(pa, pb, pv));
+    const double t = su / (su - sv);
+    const double x = pu.x + t * (pv.x - pu.x), y = pu.y + t * (pv.y - pu.y);
+    Pixel around[4];
+    for (int k = 0; k < 4; ++k) {
+      around[k] = {static_cast<std::int32_t>(std::floor(x)) + (k & 1), static_cast<std::int32_t>(std::floor(y)) + (k >> 1)};
+    }
+    std::sort(around, around + 4, [&](Pixel l, Pixel r) {
+      const double dl = std::hypot(l.x - x, l.y - y), dr = std::hypot(r.x - x, r.y - y);
+      return dl < dr || (dl == dr && (l.y < r.y || (l.y == r.y && l.x < r.x)));
+    });
+    for (const Pixel& p : around) {
+      if (p.x < window_.x0 || p.x > window_.x1 || p.y < window_.y0 || p.y > window_.y1) continue;
+      if (std::isnan(dem_.heightAt(p.x, p.y))) continue;
+      const bool on_outline = p.x == window_.x0 || p.x == window_.x1 || p.y == window_.y0 || p.y == window_.y1;
+      const std::int32_t t_p = locate(p);
+      bool is_vertex = false;
+      for (std::int32_t e = 3 * t_p; e < 3 * t_p + 3; ++e) is_vertex |= vertex(e).x == p.x && vertex(e).y == p.y;
+      if (on_outline && border_fixed_ && !is_vertex) continue;
+      constrained_.erase(edgeKey(a, b));
+      return insertConstraintVertex(p);
+    }
+    return kNone;
+  }
+
+  // Makes u - v a chain of constrained edges (Sloan 1993: the edges the segment crosses are
+  // flipped until none is left, then Delaunay is restored around the new edges). A vertex on
+  // the segment splits it. Crossing an earlier constrained edge away from a vertex bends the
+  // segment through that edge's end nearer to the segment line.
+  void insertSegment(std::int32_t u, std::int32_t v, int depth) {
+    while (u != v) {
+      const Pixel pu = coords_[static_cast<std::size_t>(u)], pv = coords_[static_cast<std::size_t>(v)];
+      const auto ahead = [&](Pixel w) {
+        return std::int64_t{w.x - pu.x} * (pv.x - pu.x) + std::int64_t{w.y - pu.y} * (pv.y - pu.y) > 0;
+      };
+      // Where the segment leaves u: along an edge (to a vertex on the segment), or across the
+      // edge opposite u in the triangle whose wedge holds v.
+      std::int32_t reached = kNone, crossed = kNone;
+      forEachOutgoing(u, [&](std::int32_t e) {
+        const std::int32_t w1 = triangles_[static_cast<std::size_t>(nextHalfedge(e))];
+        const std::int32_t w2 = triangles_[static_cast<std::size_t>(prevHalfedge(e))];
+        const Pixel p1 = coords_[static_cast<std::size_t>(w1)], p2 = coords_[static_cast<std::size_t>(w2)];
+        const std::int64_t o1 = orient(pu, p1, pv), o2 = orient(pu, p2, pv);
+        if (o1 == 0 && ahead(p1)) reached = w1;
+        else if (o2 == 0 && ahead(p2)) reached = w2;
+        else if (o1 > 0 && o2 < 0) crossed = nextHalfedge(e);
+        return reached != kNone || crossed != kNone;
+      });
+      if (reached != kNone) {
+        constrained_.insert(edgeKey(u, reached));
+        u = reached;
+        continue;
+      }
+      TERRATILES_ASSERT(crossed != kNone);
+      // Walk across the triangles the segment passes, noting the crossed edges; stop at v or
+      // at a vertex on the segment. Invariant: the crossed halfedge runs from the right of
+      // u -> v to its left.
+      std::vector<std::array<std::int32_t, 2>> crossing;
+      std::int32_t stop = kNone;
+      for (std::int32_t x = crossed; stop == kNone;) {
+        if (isConstrained(x)) {
+          if (depth >= kMaxBends || segments_bent_ >= bend_budget_) {
+            ++segments_dropped_;
+            return;
+          }
+          ++segments_bent_;
+          const std::int32_t a = triangles_[static_cast<std::size_t>(x)];
+          const std::int32_t b = triangles_[static_cast<std::size_t>(nextHalfedge(x))];
+          std::int32_t through = crossingVertex(u, v, a, b);
+          if (through != kNone) {
+            // Both lines go through the pixel nearest their crossing.
+            insertSegment(a, through, depth + 1);
+            insertSegment(through, b, depth + 1);
+          } else {
+            // No pixel near the crossing can take a vertex: bend through the crossed edge's
+            // end nearer to the segment.
+            const std::int64_t da = std::abs(orient(pu, pv, coords_[static_cast<std::size_t>(a)]));
+            const std::int64_t db = std::abs(orient(pu, pv, coords_[static_cast<std::size_t>(b)]));
+            ++segments_bent_far_;
+            through = da <= db ? a : b;
+          }
+          insertSegment(u, through, depth + 1);
+          insertSegment(through, v, depth + 1);
+          return;
+        }
+        crossing.push_back({triangles_[static_cast<std::size_t>(x)], triangles_[static_cast<std::size_t>(nextHalfedge(x))]});
+        const std::int32_t twin = halfedges_[static_cast<std::size_t>(x)];
+        TERRATILES_ASSERT(twin != kNone);
+        const std::int32_t r = triangles_[static_cast<std::size_t>(prevHalfedge(twin))];
+        const std::int64_t side = orient(pu, pv, coords_[static_cast<std::size_t>(r)]);
+        if (r == v || side == 0) stop = r;
+        else x = side > 0 ? nextHalfedge(twin) : prevHalfedge(twin);
+      }
+      // Flip the crossed edges away; a flip is possible where the quad is strictly convex,
+      // and the others wait for their turn (Sloan's queue).
+      std::deque<std::array<std::int32_t, 2>> queue(crossing.begin(), crossing.end());
+      std::vector<std::array<std::int32_t, 2>> created;
+      const std::size_t limit = 64 * crossing.size() * crossing.size() + 1024;
+      for (std::size_t step = 0; !queue.empty(); ++step) {
+        TERRATILES_ASSERT(step < limit);
+        const std::array<std::int32_t, 2> edge = queue.front();
+        queue.pop_front();
+        const std::int32_t e = findHalfedge(edge[0], edge[1]);
+        TERRATILES_ASSERT(e != kNone);
+        const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+        const std::int32_t L = triangles_[static_cast<std::size_t>(prevHalfedge(e))];
+        const std::int32_t R = triangles_[static_cast<std::size_t>(prevHalfedge(twin))];
+        const Pixel pl = coords_[static_cast<std::size_t>(L)], pr = coords_[static_cast<std::size_t>(R)];
+        const int side_a = sign(orient(pl, pr, coords_[static_cast<std::size_t>(edge[0])]));
+        const int side_b = sign(orient(pl, pr, coords_[static_cast<std::size_t>(edge[1])]));
+        if (side_a * side_b >= 0) {  // not strictly convex
+          queue.push_back(edge);
+          continue;
+        }
+        flipEdge(e);
+        const int side_l = sign(orient(pu, pv, pl)), side_r = sign(orient(pu, pv, pr));
+        if (side_l * side_r < 0) queue.push_back({R, L});
+        else created.push_back({R, L});
+      }
+      constrained_.insert(edgeKey(u, stop));
+      restoreDelaunay(created);
+      u = stop;
+    }
+  }
+
+  // Lawson's flips from the given edges outwards, constrained edges never flipped.
+  void restoreDelaunay(std::vector<std::array<std::int32_t, 2>> edges) {
+    const std::size_t limit = 64 * edges.size() * edges.size() + 1024;
+    for (std::size_t step = 0; !edges.empty(); ++step) {
+      TERRATILES_ASSERT(step < limit);
+      const std::array<std::int32_t, 2> edge = edges.back();
+      edges.pop_back();
+      const std::int32_t e = findHalfedge(edge[0], edge[1]);
+      if (e == kNone || isConstrained(e)) continue;
+      const std::int32_t twin = halfedges_[static_cast<std::size_t>(e)];
+      if (twin == kNone) continue;
+      const std::int32_t P = edge[0], Q = edge[1];
+      const std::int32_t L = triangles_[static_cast<std::size_t>(prevHalfedge(e))];
+      const std::int32_t R = triangles_[static_cast<std::size_t>(prevHalfedge(twin))];
+      const Pixel pp = coords_[static_cast<std::size_t>(P)], pq = coords_[static_cast<std::size_t>(Q)];
+      const Pixel pl = coords_[static_cast<std::size_t>(L)], pr = coords_[static_cast<std::size_t>(R)];
+      if (!inCircle(pp, pq, pl, pr)) continue;
+      if (sign(orient(pl, pr, pp)) * sign(orient(pl, pr, pq)) >= 0) continue;
+      flipEdge(e);
+      edges.insert(edges.end(), {{P, R}, {R, Q}, {Q, L}, {L, P}});
+    }
   }
 
   // Finds the worst pixel of every changed triangle and queues those above the bound.
@@ -703,6 +1016,14 @@ class GreedyInsertion {
   std::vector<std::uint8_t> pending_flag_;
   std::vector<HeapEntry> heap_;
   std::vector<std::int32_t> pending_;
+  // Break lines: only used when the window has some.
+  static constexpr int kMaxBends = 16;
+  bool tracking_ = false;
+  std::vector<std::int32_t> vertex_edge_;  // a halfedge leaving each vertex
+  std::unordered_set<std::uint64_t> constrained_;  // edgeKey of the constrained edges
+  std::int32_t last_located_ = 0;
+  std::size_t segments_bent_ = 0, segments_bent_far_ = 0, segments_dropped_ = 0;
+  std::size_t bend_budget_ = 0;  // bends allowed in a window, against pathological inputs
 };
 
 }  // namespace
@@ -711,9 +1032,11 @@ namespace {
 
 // Border polylines for the windowed build: the positions along one straight run of pixels
 // (a window side, endpoints included) that make it within max_error of the DEM by linear
-// interpolation, by recursive worst-pixel insertion. A run with nodata keeps every valid
-// pixel (and its endpoints, which become virtual when nodata).
-std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double max_error_m) {
+// interpolation, by recursive worst-pixel insertion, keeping the `forced` positions (break
+// line ends on the border). A run with nodata keeps every valid pixel (and its endpoints,
+// which become virtual when nodata).
+std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double max_error_m,
+                               const std::vector<Pixel>& forced) {
   const std::int32_t length = std::max(std::abs(to.x - from.x), std::abs(to.y - from.y));
   const std::int32_t dx = (to.x > from.x) - (to.x < from.x), dy = (to.y > from.y) - (to.y < from.y);
   auto at = [&](std::int32_t i) { return Pixel{from.x + dx * i, from.y + dy * i}; };
@@ -725,7 +1048,13 @@ std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double 
   if (has_nodata) {
     for (std::int32_t i = 1; i < length; ++i) keep[static_cast<std::size_t>(i)] = !std::isnan(height(i));
   } else {
-    std::vector<std::pair<std::int32_t, std::int32_t>> segments{{0, length}};
+    for (const Pixel& p : forced) keep[static_cast<std::size_t>(std::max(std::abs(p.x - from.x), std::abs(p.y - from.y)))] = 1;
+    std::vector<std::pair<std::int32_t, std::int32_t>> segments;
+    for (std::int32_t i0 = 0, i = 1; i <= length; ++i) {
+      if (!keep[static_cast<std::size_t>(i)]) continue;
+      segments.push_back({i0, i});
+      i0 = i;
+    }
     while (!segments.empty()) {
       const auto [i0, i1] = segments.back();
       segments.pop_back();
@@ -759,7 +1088,60 @@ std::vector<std::int32_t> blockEdges(std::int32_t length, std::int32_t block) {
 
 }  // namespace
 
+namespace {
+
+// Splits segments where they cross the windows' border lines (column xs[i] or row ys[j]
+// strictly between their ends), at the border pixel nearest to the crossing. Pieces whose
+// new end is nodata are dropped (counted).
+std::vector<WindowSegment> splitAtWindowBorders(const DemGrid& dem, const std::vector<PixelSegment>& segments,
+                                                const std::vector<std::int32_t>& xs,
+                                                const std::vector<std::int32_t>& ys, std::size_t& dropped) {
+  std::vector<WindowSegment> pieces;
+  for (const PixelSegment& segment : segments) {
+    pieces.push_back({{segment.col0, segment.row0}, {segment.col1, segment.row1}});
+  }
+  // Columns first, then rows: a row split keeps a piece's columns between its ends.
+  for (const bool columns : {true, false}) {
+    const std::vector<std::int32_t>& lines = columns ? xs : ys;
+    std::vector<WindowSegment> split;
+    for (const WindowSegment& piece : pieces) {
+      const std::int32_t a = columns ? piece.from.x : piece.from.y, b = columns ? piece.to.x : piece.to.y;
+      const std::int32_t low = std::min(a, b), high = std::max(a, b);
+      Pixel start = piece.from;
+      bool valid = true;
+      // The lines strictly between the ends, in order from `from` to `to`.
+      std::vector<std::int32_t> crossed;
+      for (auto it = std::upper_bound(lines.begin(), lines.end(), low); it != lines.end() && *it < high; ++it) {
+        crossed.push_back(*it);
+      }
+      if (a > b) std::reverse(crossed.begin(), crossed.end());
+      for (const std::int32_t line : crossed) {
+        const double t = static_cast<double>(line - a) / static_cast<double>(b - a);
+        const double other = columns ? piece.from.y + t * (piece.to.y - piece.from.y)
+                                     : piece.from.x + t * (piece.to.x - piece.from.x);
+        const auto snapped = static_cast<std::int32_t>(std::lround(other));
+        const Pixel cut = columns ? Pixel{line, snapped} : Pixel{snapped, line};
+        const bool cut_valid = dem.isValid(cut.x, cut.y);
+        if (valid && cut_valid && (cut.x != start.x || cut.y != start.y)) split.push_back({start, cut});
+        if (valid && !cut_valid) ++dropped;
+        start = cut;
+        valid = cut_valid;
+      }
+      if (valid && (piece.to.x != start.x || piece.to.y != start.y)) split.push_back({start, piece.to});
+    }
+    pieces = std::move(split);
+  }
+  return pieces;
+}
+
+}  // namespace
+
 TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progress) {
+  return buildConstrainedTin(dem, options, {}, progress).mesh;
+}
+
+ConstrainedTin buildConstrainedTin(const DemGrid& dem, const TinOptions& options,
+                                   const std::vector<PixelSegment>& segments, Progress& progress) {
   if (!(options.max_error_m > 0) || !std::isfinite(options.max_error_m)) {
     throw Error(ErrorCode::Usage, "--tin-max-error is " + std::to_string(options.max_error_m) +
                                       "; expected a positive number of metres");
@@ -768,16 +1150,30 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
     throw Error(ErrorCode::Input, "the DEM is " + std::to_string(dem.width) + " x " +
                                       std::to_string(dem.height) + " pixels; expected at least 2 x 2");
   }
+  for (const PixelSegment& segment : segments) {
+    for (const Pixel p : {Pixel{segment.col0, segment.row0}, Pixel{segment.col1, segment.row1}}) {
+      if (p.x < 0 || p.y < 0 || p.x >= dem.width || p.y >= dem.height || !dem.isValid(p.x, p.y)) {
+        throw Error(ErrorCode::Internal, "a break line ends at pixel (" + std::to_string(p.x) + ", " +
+                                             std::to_string(p.y) + "), outside the grid's valid pixels");
+      }
+    }
+  }
   const DemFacts facts = demFacts(dem);
+  ConstrainedTin result;
   const bool windowed = options.block_pixels > 0 &&
                         (dem.width > options.block_pixels + 1 || dem.height > options.block_pixels + 1);
   if (!windowed) {
     progress.beginStage("TIN (greedy insertion)", dem.pixelCount());
+    std::vector<WindowSegment> window_segments;
+    for (const PixelSegment& segment : segments) {
+      if (segment.col0 == segment.col1 && segment.row0 == segment.row1) continue;
+      window_segments.push_back({{segment.col0, segment.row0}, {segment.col1, segment.row1}});
+    }
     GreedyInsertion insertion(dem, options.max_error_m, {0, 0, dem.width - 1, dem.height - 1}, facts);
-    insertion.run(&progress);
+    insertion.run(&progress, nullptr, &window_segments);
     progress.endStage();
     WindowMesh window_mesh = insertion.mesh();
-    TinMesh mesh;
+    TinMesh& mesh = result.mesh;
     mesh.vertices.reserve(window_mesh.pixels.size());
     for (const Pixel& p : window_mesh.pixels) mesh.vertices.push_back(gridPoint(dem, p));
     mesh.triangle_indices = std::move(window_mesh.triangle_indices);
@@ -785,7 +1181,11 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
       throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
                                     "valid pixels; expected a DEM with some contiguous data");
     }
-    return mesh;
+    result.constrained_edges = std::move(window_mesh.constrained_edges);
+    result.edges_dropped = window_mesh.constrained_edges_dropped;
+    result.segments_bent = window_mesh.segments_bent;
+    result.segments_bent_to_end = window_mesh.segments_bent_to_end;
+    return result;
   }
 
   // Windowed: the shared border polylines first, then every window on its own (in parallel),
@@ -794,17 +1194,57 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
   const std::vector<std::int32_t> ys = blockEdges(dem.height, options.block_pixels);
   const std::size_t nx = xs.size() - 1, ny = ys.size() - 1;
   // vertical[i][j]: column xs[i] between ys[j] and ys[j+1]; horizontal[j][i]: row ys[j]
-  // between xs[i] and xs[i+1].
+  // between xs[i] and xs[i+1]. First the break line ends on them (which must be border
+  // vertices of both windows), then the simplified runs that keep them.
   std::vector<std::vector<std::vector<Pixel>>> vertical(xs.size(), std::vector<std::vector<Pixel>>(ny));
   std::vector<std::vector<std::vector<Pixel>>> horizontal(ys.size(), std::vector<std::vector<Pixel>>(nx));
+  // Break lines: split at the border lines, and each piece goes to the windows whose closed
+  // box holds it (two when it runs along a border).
+  std::vector<std::vector<WindowSegment>> window_segments(segments.empty() ? 0 : nx * ny);
+  if (!segments.empty()) {
+    const std::vector<WindowSegment> pieces = splitAtWindowBorders(dem, segments, xs, ys, result.edges_dropped);
+    // The windows along one axis whose closed span [lines[k], lines[k + 1]] holds [low, high]:
+    // one, or two for a piece on their common line.
+    const auto spans = [](const std::vector<std::int32_t>& lines, std::int32_t low, std::int32_t high) {
+      const auto windows = static_cast<std::int64_t>(lines.size()) - 1;
+      const std::int64_t at = std::upper_bound(lines.begin(), lines.end(), low) - lines.begin() - 1;
+      std::array<std::size_t, 2> range{1, 0};  // empty
+      for (std::int64_t k = std::max<std::int64_t>(0, at - 1); k <= std::min(at, windows - 1); ++k) {
+        if (lines[static_cast<std::size_t>(k)] > low || lines[static_cast<std::size_t>(k + 1)] < high) continue;
+        if (range[0] > range[1]) range[0] = static_cast<std::size_t>(k);
+        range[1] = static_cast<std::size_t>(k);
+      }
+      return range;
+    };
+    for (const WindowSegment& piece : pieces) {
+      for (const Pixel p : {piece.from, piece.to}) {
+        const auto column = std::lower_bound(xs.begin(), xs.end(), p.x);
+        const auto row = std::lower_bound(ys.begin(), ys.end(), p.y);
+        const bool on_column = column != xs.end() && *column == p.x, on_row = row != ys.end() && *row == p.y;
+        if (on_column && on_row) continue;  // a window corner
+        if (on_column) {
+          const auto j = static_cast<std::size_t>(std::upper_bound(ys.begin(), ys.end(), p.y) - ys.begin()) - 1;
+          vertical[static_cast<std::size_t>(column - xs.begin())][j].push_back(p);
+        } else if (on_row) {
+          const auto i = static_cast<std::size_t>(std::upper_bound(xs.begin(), xs.end(), p.x) - xs.begin()) - 1;
+          horizontal[static_cast<std::size_t>(row - ys.begin())][i].push_back(p);
+        }
+      }
+      const auto [i0, i1] = spans(xs, std::min(piece.from.x, piece.to.x), std::max(piece.from.x, piece.to.x));
+      const auto [j0, j1] = spans(ys, std::min(piece.from.y, piece.to.y), std::max(piece.from.y, piece.to.y));
+      for (std::size_t j = j0; j <= j1; ++j) {
+        for (std::size_t i = i0; i <= i1; ++i) window_segments[j * nx + i].push_back(piece);
+      }
+    }
+  }
   for (std::size_t i = 0; i < xs.size(); ++i) {
     for (std::size_t j = 0; j < ny; ++j) {
-      vertical[i][j] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i], ys[j + 1]}, options.max_error_m);
+      vertical[i][j] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i], ys[j + 1]}, options.max_error_m, vertical[i][j]);
     }
   }
   for (std::size_t j = 0; j < ys.size(); ++j) {
     for (std::size_t i = 0; i < nx; ++i) {
-      horizontal[j][i] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i + 1], ys[j]}, options.max_error_m);
+      horizontal[j][i] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i + 1], ys[j]}, options.max_error_m, horizontal[j][i]);
     }
   }
   // Every batch of windows is built in parallel, then stitched into the mesh and released,
@@ -814,7 +1254,7 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
   progress.beginStage("TIN (greedy insertion, windowed)", nx * ny);
   const std::size_t window_count = nx * ny;
   std::vector<WindowMesh> batch;
-  TinMesh mesh;
+  TinMesh& mesh = result.mesh;
   std::unordered_map<std::uint64_t, std::uint32_t> outline_index;
   std::vector<std::uint32_t> remap;
   constexpr std::size_t kBatch = 64;  // report progress and check Ctrl-C between batches
@@ -828,7 +1268,7 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
         border.insert(border.end(), run->begin(), run->end());
       }
       GreedyInsertion insertion(dem, options.max_error_m, {xs[i], ys[j], xs[i + 1], ys[j + 1]}, facts);
-      insertion.run(nullptr, &border);
+      insertion.run(nullptr, &border, window_segments.empty() ? nullptr : &window_segments[b]);
       batch[b - first] = insertion.mesh();
     });
     // Grow the mesh once per batch to the size projected from the windows done so far (plus
@@ -866,6 +1306,13 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
         remap[v] = it->second;
       }
       for (const std::uint32_t v : window.triangle_indices) mesh.triangle_indices.push_back(remap[v]);
+      for (const auto& edge : window.constrained_edges) {
+        const std::uint32_t u = remap[edge[0]], v = remap[edge[1]];
+        result.constrained_edges.push_back({std::min(u, v), std::max(u, v)});
+      }
+      result.edges_dropped += window.constrained_edges_dropped;
+      result.segments_bent += window.segments_bent;
+      result.segments_bent_to_end += window.segments_bent_to_end;
       window = WindowMesh{};
     }
     progress.advance(end - first);
@@ -875,7 +1322,11 @@ TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progre
     throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
                                   "valid pixels; expected a DEM with some contiguous data");
   }
-  return mesh;
+  // A piece along a window border is an edge of both windows.
+  std::sort(result.constrained_edges.begin(), result.constrained_edges.end());
+  result.constrained_edges.erase(std::unique(result.constrained_edges.begin(), result.constrained_edges.end()),
+                                 result.constrained_edges.end());
+  return result;
 }
 
 }  // namespace terratiles

@@ -18,6 +18,10 @@
 // the valid data to within one pixel (a valid pixel left uncovered touches nodata).
 // Memory: O(pixels) for the candidate bookkeeping plus O(vertices).
 
+#include <array>
+#include <cstdint>
+#include <vector>
+
 #include "src/base/progress.h"
 #include "src/dem/dem_grid.h"
 #include "src/tin/tin_mesh.h"
@@ -37,6 +41,40 @@ struct TinOptions {
   // adds 2 % triangles at 20 m on N57E011.
   std::int32_t block_pixels = 128;
 };
+
+// A break line piece between two pixel centres (col, row) of the grid, e.g. part of a road or
+// a building outline snapped to the grid (formats/vector/read_constraints.h makes them).
+struct PixelSegment {
+  std::int32_t col0 = 0, row0 = 0, col1 = 0, row1 = 0;
+};
+
+struct ConstrainedTin {
+  TinMesh mesh;
+  // The constrained edges as vertex pairs, each an edge of the mesh. A segment becomes a
+  // chain of them where a vertex lies on it (another segment's end, a window border vertex,
+  // or a pixel the greedy insertion added on it).
+  std::vector<std::array<std::uint32_t, 2>> constrained_edges;
+  // Crossings of two segments away from a pixel centre: both are bent through the pixel
+  // nearest the crossing (under a pixel off their lines)...
+  std::size_t segments_bent = 0;
+  // ... or, of those, where no pixel around the crossing could take a vertex (nodata, or a
+  // window border), the later segment is bent through the crossed edge's nearer end.
+  std::size_t segments_bent_to_end = 0;
+  // Segments, or pieces of them, left out: over nodata or out of the grid (counted by the
+  // reader), or whose edge fell in a triangle over nodata (counted here).
+  std::size_t edges_dropped = 0;
+};
+
+// Greedy insertion with break lines: every segment is inserted as a constrained edge (a
+// constrained Delaunay triangulation: no flip ever removes it) before any error-driven
+// insertion, so the same error guarantee holds and every segment is a chain of TIN edges.
+// Segments are split at the window borders of a windowed build (the crossing snapped to the
+// nearest border pixel, which both windows take as a border vertex) and where they cross
+// each other away from a pixel centre (see segments_bent; after 8 bends per segment of a
+// window, further crossings drop the later segment, counted in edges_dropped). Each segment's two ends must be
+// valid pixels of the grid.
+ConstrainedTin buildConstrainedTin(const DemGrid& dem, const TinOptions& options,
+                                   const std::vector<PixelSegment>& segments, Progress& progress);
 
 TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progress);
 

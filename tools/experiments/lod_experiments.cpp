@@ -46,6 +46,7 @@ struct ExperimentOptions {
   std::vector<Raster> rasters;
   int runs = 5;
   std::string experiment = "all";
+  int rounds_clusters = 8;  // clusters per round of experiment 2 (the paper used 64 on one TIN)
 };
 
 double parsePositive(const std::string& text, const std::string& what) {
@@ -61,18 +62,20 @@ ExperimentOptions parseOptions(int argc, char** argv) {
   ExperimentOptions options;
   const std::string usage =
       "usage: terratiles_lod_experiments RASTER[:TIN_MAX_ERROR]... [--runs 5] "
-      "[--experiment all|partition|rounds|constraints]";
+      "[--experiment all|partition|rounds|constraints] [--rounds-clusters 8]";
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--help" || arg == "-h") {
       std::printf("%s\n", usage.c_str());
       std::exit(0);
     }
-    if (arg == "--runs" || arg == "--experiment") {
+    if (arg == "--runs" || arg == "--experiment" || arg == "--rounds-clusters") {
       if (i + 1 >= argc) throw Error(ErrorCode::Usage, arg + " needs a value; " + usage);
       const std::string value = argv[++i];
       if (arg == "--runs") {
         options.runs = static_cast<int>(parsePositive(value, "--runs"));
+      } else if (arg == "--rounds-clusters") {
+        options.rounds_clusters = static_cast<int>(parsePositive(value, "--rounds-clusters"));
       } else {
         if (value != "all" && value != "partition" && value != "rounds" && value != "constraints") {
           throw Error(ErrorCode::Usage, "--experiment expects all, partition, rounds or constraints, found '" + value + "'");
@@ -138,14 +141,14 @@ void partitionExperiment(const DemGrid& dem, const TinMesh& tin, const std::stri
 
 // ---- 2. re-partition vs fixed borders -----------------------------------------------------
 
-void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs) {
+void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs, int clusters) {
   constexpr int kRounds = 5;
   std::vector<double> max_error[2][kRounds + 1], rms_error[2][kRounds + 1], triangles[2][kRounds + 1];
   for (int run = 0; run < runs; ++run) {
     for (int fixed = 0; fixed < 2; ++fixed) {
       std::fprintf(stderr, "%s: rounds experiment, run %d, %s\n", name.c_str(), run + 1, fixed ? "fixed" : "re-partition");
       LevelOptions options;
-      options.clusters_per_level.assign(kRounds, 8);
+      options.clusters_per_level.assign(kRounds, clusters);
       options.coarser_levels = kRounds;
       options.repartition = fixed == 0;
       options.seed = static_cast<std::uint32_t>(run + 1);
@@ -163,6 +166,23 @@ void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string&
                 mean(triangles[1][round]), mean(max_error[0][round]), mean(max_error[1][round]),
                 mean(rms_error[0][round]), mean(rms_error[1][round]));
   }
+  // Fixed borders stop simplifying once only border edges are left, so after five rounds the
+  // two runs may hold very different triangle counts. Also compare at equal size: the first
+  // re-partition round with no more triangles than the fixed run's last.
+  const double fixed_triangles = mean(triangles[1][kRounds]), fixed_error = mean(max_error[1][kRounds]);
+  int matched = kRounds;
+  for (int round = 1; round <= kRounds; ++round) {
+    if (mean(triangles[0][round]) <= fixed_triangles) {
+      matched = round;
+      break;
+    }
+  }
+  std::printf("%-34s after %d rounds: re-partition %.2f m vs fixed %.2f m (%s); at equal size (re-partition round %d, "
+              "%.0f vs %.0f triangles): %.2f m vs %.2f m (%s)\n",
+              name.c_str(), kRounds, mean(max_error[0][kRounds]), fixed_error,
+              mean(max_error[0][kRounds]) < fixed_error ? "re-partition lower" : "re-partition NOT lower", matched,
+              mean(triangles[0][matched]), fixed_triangles, mean(max_error[0][matched]), fixed_error,
+              mean(max_error[0][matched]) < fixed_error ? "re-partition lower" : "re-partition NOT lower");
 }
 
 // ---- 3. constraints -----------------------------------------------------------------------
@@ -222,10 +242,10 @@ int runExperiments(int argc, char** argv) {
   }
   if (all || options.experiment == "rounds") {
     std::printf("\n== 2. five rounds: re-partition every round vs fixed borders (paper fig 42)\n"
-                "METIS 8 clusters, each round to 50 %% of the edges, no error budget; mean of %d seeds\n", options.runs);
+                "METIS %d clusters, each round to 50 %% of the edges, no error budget; mean of %d seeds\n", options.rounds_clusters, options.runs);
     std::printf("%-34s %5s %10s %10s %10s %10s %9s %9s\n", "raster @ TIN max error", "round", "tri repart",
                 "tri fixed", "max repart", "max fixed", "rms repart", "rms fixed");
-    for (const Input& input : inputs) roundsExperiment(input.dem, input.tin, input.name, options.runs);
+    for (const Input& input : inputs) roundsExperiment(input.dem, input.tin, input.name, options.runs, options.rounds_clusters);
   }
   if (all || options.experiment == "constraints") {
     std::printf("\n== 3. constrained edges vs error (paper 6.1)\n"

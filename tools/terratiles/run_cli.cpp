@@ -26,6 +26,7 @@
 #include "formats/geoid/read_geoid.h"
 #include "formats/output_directory.h"
 #include "formats/tin/tin_file.h"
+#include "formats/vector/read_break_lines.h"
 #include "src/lod/build_levels.h"
 #include "src/tin/build_tin.h"
 #include "src/tin/measure_tin.h"
@@ -164,8 +165,37 @@ struct TinCommandOptions {
   std::vector<std::string> inputs;
   std::string output;
   double max_error_m = 0.5;
+  std::string constraints;  // break lines (OGR vector file), or empty
   bool force = false;
 };
+
+// The finest TIN, with the break lines of `constraints_path` (when given) as constrained
+// edges; reports what was read on `err` unless quiet.
+ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std::string& constraints_path,
+                              Progress& progress, bool quiet, std::ostream& err) {
+  BreakLines lines;
+  if (!constraints_path.empty()) {
+    progress.beginStage("reading break lines", 0);
+    lines = readBreakLines(constraints_path, dem);
+    progress.endStage();
+    if (lines.segments.empty()) {
+      throw Error(ErrorCode::Input, constraints_path + ": no line or polygon of it crosses the DEM's valid data (" +
+                                        std::to_string(lines.features) + " features with lines, " +
+                                        std::to_string(lines.segments_read) +
+                                        " segments); expected break lines over the DEM (in any CRS)");
+    }
+  }
+  TinOptions options;
+  options.max_error_m = max_error_m;
+  ConstrainedTin tin = buildConstrainedTin(dem, options, lines.segments, progress);
+  if (!quiet && !constraints_path.empty()) {
+    err << "terratiles: break lines from " << constraints_path << ": " << lines.features << " features, "
+        << lines.segments_read << " segments read, " << lines.pieces_left_out
+        << " cut or left out (outside the grid or over nodata), " << tin.segments_bent
+        << " bent where they crossed another line, " << tin.constrained_edges.size() << " constrained TIN edges\n";
+  }
+  return tin;
+}
 
 // `terratiles tin`: DEM -> greedy-insertion TIN -> OFF/OBJ/PLY in the DEM's CRS.
 void runTinCommand(const TinCommandOptions& options, Progress& progress, bool quiet, std::ostream& err) {
@@ -178,9 +208,7 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   progress.beginStage("reading DEM", 0);
   DemGrid dem = readDem(options.inputs);
   progress.endStage();
-  TinOptions tin_options;
-  tin_options.max_error_m = options.max_error_m;
-  TinMesh mesh = buildTin(dem, tin_options, progress);
+  TinMesh mesh = buildFinestTin(dem, options.max_error_m, options.constraints, progress, quiet, err).mesh;
   progress.beginStage("checking every pixel", 0);
   const TinErrorStatistics errors = measureTin(dem, mesh);
   progress.endStage();
@@ -200,6 +228,10 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   }
 }
 
+constexpr const char* kConstraintsHelp =
+    "Break lines: the lines and polygon rings of an OGR vector file (GeoJSON, GeoPackage, Shapefile; any CRS) are "
+    "snapped to the DEM's pixels and kept as edges of the TIN (and of every level)";
+
 struct LevelsCommandOptions {
   std::vector<std::string> inputs;
   std::string output;
@@ -207,6 +239,7 @@ struct LevelsCommandOptions {
   std::string partitioner = "metis";
   double level_error_growth = 2;  // 0: no budget
   std::size_t random_constraints = 0;
+  std::string constraints;  // break lines (OGR vector file), or empty
   std::string format = "ply";
   bool force = false;
   int threads = 0;  // 0: all cores
@@ -225,15 +258,18 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   progress.beginStage("reading DEM", 0);
   const DemGrid dem = readDem(options.inputs);
   progress.endStage();
-  TinMesh tin = buildTin(dem, TinOptions{options.tin_max_error_m}, progress);
+  ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress, quiet, err);
+  TinMesh tin = std::move(finest.mesh);
   options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
   if (options.level_error_growth > 0) {
     options.levels.level_error_growth = options.level_error_growth;
     options.levels.first_budget_m = options.tin_max_error_m * options.level_error_growth;
   }
-  std::vector<std::array<std::uint32_t, 2>> constraints;
+  std::vector<std::array<std::uint32_t, 2>> constraints = std::move(finest.constrained_edges);
+  const std::size_t break_line_edges = constraints.size();
   if (options.random_constraints > 0) {
-    constraints = randomFaceSetConstraints(tin, options.random_constraints, 8, options.levels.seed);
+    const auto random = randomFaceSetConstraints(tin, options.random_constraints, 8, options.levels.seed);
+    constraints.insert(constraints.end(), random.begin(), random.end());
   }
   const std::size_t constraint_count = constraints.size();
   const std::vector<Level> levels = buildLevels(dem, std::move(tin), options.levels, std::move(constraints), progress);
@@ -248,6 +284,10 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   summary["level_ratio"] = options.levels.level_ratio;
   summary["level_error_growth"] = options.level_error_growth;
   summary["constrained_edges"] = constraint_count;
+  summary["break_lines"] = options.constraints.empty() ? nlohmann::json(nullptr)
+                                                       : nlohmann::json{{"file", options.constraints},
+                                                                        {"constrained_edges", break_line_edges},
+                                                                        {"segments_bent", finest.segments_bent}};
   std::ostringstream table;
   table << "level  triangles   vertices  clusters   max error   rms error     budget  file\n";
   for (std::size_t l = 0; l < levels.size(); ++l) {
@@ -389,6 +429,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->add_option("--tin-max-error", tin.max_error_m,
                    "Largest vertical error in metres allowed at any pixel")
       ->capture_default_str();
+  tin_command->add_option("--constraints", tin.constraints, kConstraintsHelp);
   tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
   addProgressOptions(*tin_command, quiet, progress_choice);
 
@@ -437,6 +478,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Lock every edge of N random connected sets of 8 triangles at every level "
                    "(the paper's stand-in for roads and buildings)")
       ->capture_default_str();
+  levels_command->add_option("--constraints", levels.constraints, kConstraintsHelp);
   levels_command->add_option("--seed", levels.levels.seed, "Seed of METIS and of the random choices")
       ->capture_default_str();
   levels_command->add_option("--format", levels.format, "TIN file format: ply (binary), off or obj")
