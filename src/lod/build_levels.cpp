@@ -174,6 +174,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     level.index_in_coarser = std::move(simplified.new_index_of_vertex);
     next.mesh = std::move(simplified.mesh);
     next.edge_count = edges.size();
+    next.inherited_partition = {simplified.cluster_of_face, level.partition.cluster_count};
     inherited = {std::move(simplified.cluster_of_face), level.partition.cluster_count};
     next.refused_for_error = simplified.refused_for_error;
     next.refused_for_flip = simplified.refused_for_flip;

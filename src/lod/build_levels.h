@@ -55,6 +55,9 @@ struct Level {
   // The partition that split this level to build the next coarser one (empty on the
   // coarsest level).
   FacePartition partition;
+  // The finer level's partition carried over to this level's faces: every face lies inside
+  // one cluster of the finer level, whose outline this level keeps (empty on level 0).
+  FacePartition inherited_partition;
   // Per vertex of this level: its index in the next coarser level, or kRemovedVertex.
   std::vector<std::uint32_t> index_in_coarser;
   TinErrorStatistics error;  // measured against the DEM

@@ -18,7 +18,10 @@
 #include "src/geo/crs_transform.h"
 #include "src/geo/geoid.h"
 #include "src/geo/place_on_globe.h"
+#include "formats/vector/read_break_lines.h"
+#include "src/lod/build_levels.h"
 #include "src/lod/grid_pyramid.h"
+#include "src/tin/measure_tin.h"
 #include "tileset/tileset.h"
 
 namespace terratiles {
@@ -33,9 +36,16 @@ void validateOptions(const BuildOptions& options) {
     throw Error(ErrorCode::Usage, "--tile-cells is " + std::to_string(options.tile_cells) +
                                       "; expected 2 to 4096");
   }
-  if (options.max_zoom > 20) {
+  if (options.max_zoom > 24) {
     throw Error(ErrorCode::Usage,
-                "--max-zoom is " + std::to_string(options.max_zoom) + "; expected 0 to 20");
+                "--max-zoom is " + std::to_string(options.max_zoom) + "; expected 0 to 24 (or -1: from the data)");
+  }
+  if (!(options.tin_max_error_m > 0) || !std::isfinite(options.tin_max_error_m)) {
+    throw Error(ErrorCode::Usage, "--tin-max-error is " + std::to_string(options.tin_max_error_m) +
+                                      "; expected a positive number of metres");
+  }
+  if (!(options.level_ratio >= 0.01 && options.level_ratio <= 0.99)) {
+    throw Error(ErrorCode::Usage, "--level-ratio is " + std::to_string(options.level_ratio) + "; expected 0.01 to 0.99");
   }
   const double bits = std::log2(options.position_step_m);
   if (!(options.position_step_m > 0) || bits != std::round(bits) || bits > 0 || bits < -16) {
@@ -155,9 +165,13 @@ EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const
   return out;
 }
 
-// Attaches `node` under its ancestors in `nodes`, creating content-less ancestors if needed.
-TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes, int max_zoom) {
-  for (int zoom = max_zoom; zoom > 0; --zoom) {
+// Attaches every node under its parent in `nodes`, finest zoom first, creating content-less
+// ancestors where needed, until one node (the common ancestor) is left: the root.
+TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes) {
+  while (nodes.size() > 1) {
+    int zoom = 0;
+    for (const auto& [key, node] : nodes) zoom = std::max(zoom, std::get<0>(key));
+    TERRATILES_ASSERT(zoom > 0);  // one pyramid: zoom 0 has a single tile per scheme half
     std::vector<std::tuple<int, int, int>> at_zoom;
     for (const auto& [key, node] : nodes) {
       if (std::get<0>(key) == zoom) at_zoom.push_back(key);
@@ -171,12 +185,75 @@ TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes, int max
       parent.children.push_back(std::move(child));
     }
   }
-  TERRATILES_ASSERT(nodes.size() == 1);
   TileNode root = std::move(nodes.begin()->second);
   return root;
 }
 
+// What one zoom shows: a level mesh and the triangles of each of its tiles.
+struct ZoomContent {
+  std::int32_t zoom = 0;
+  std::int32_t step = 0;      // grid: pixels between samples
+  std::size_t clusters = 0;   // clusters: the level's own clusters
+  const TinMesh* mesh = nullptr;
+  std::vector<PyramidTile> tiles;
+  double max_error_m = 0;
+  double rms_error_m = 0;
+};
+
+// Per tile: max and RMS |content - DEM| over the valid pixels its triangles cover (a pixel on
+// an edge between two of its triangles counts twice in the RMS).
+void measureTiles(const DemGrid& dem, const TinMesh& mesh, std::vector<PyramidTile>& tiles) {
+  tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
+    PyramidTile& tile = tiles[i];
+    double max_error = 0, sum_squares = 0;
+    std::size_t count = 0;
+    const auto& idx = tile.triangle_indices;
+    for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+      forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
+                          [&](std::size_t pixel, double surface_m) {
+                            const float h = dem.heights_m[pixel];
+                            if (std::isnan(h)) return true;
+                            const double error = std::fabs(surface_m - h);
+                            max_error = std::max(max_error, error);
+                            sum_squares += error * error;
+                            ++count;
+                            return true;
+                          });
+    }
+    tile.max_error_m = max_error;
+    tile.rms_error_m = count ? std::sqrt(sum_squares / static_cast<double>(count)) : 0;
+    tile.measured_pixels = count;
+  });
+}
+
 }  // namespace
+
+ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std::string& constraints_path,
+                              Progress& progress) {
+  BreakLines lines;
+  if (!constraints_path.empty()) {
+    progress.beginStage("reading break lines", 0);
+    lines = readBreakLines(constraints_path, dem);
+    progress.endStage();
+    if (lines.segments.empty()) {
+      throw Error(ErrorCode::Input, constraints_path + ": no line or polygon of it crosses the DEM's valid data (" +
+                                        std::to_string(lines.features) + " features with lines, " +
+                                        std::to_string(lines.segments_read) +
+                                        " segments); expected break lines over the DEM (in any CRS)");
+    }
+  }
+  TinOptions options;
+  options.max_error_m = max_error_m;
+  ConstrainedTin tin = buildConstrainedTin(dem, options, lines.segments, progress);
+  if (!constraints_path.empty()) {
+    progress.note("break lines from " + constraints_path + ": " + std::to_string(lines.features) + " features, " +
+                  std::to_string(lines.segments_read) + " segments read, " + std::to_string(lines.pieces_left_out) +
+                  " cut or left out (outside the grid or over nodata), " + std::to_string(tin.segments_bent) +
+                  " bent where they crossed another line, " + std::to_string(tin.constrained_edges.size()) +
+                  " constrained TIN edges");
+  }
+  return tin;
+}
 
 BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   const auto start = std::chrono::steady_clock::now();
@@ -218,16 +295,72 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     summary.centre_lat_deg = centre.lat_deg;
   }
 
-  GridPyramidOptions pyramid_options;
-  pyramid_options.tile_cells = options.tile_cells;
-  pyramid_options.max_zoom = options.max_zoom;
-  const GridPyramid pyramid = buildGridPyramid(dem, pyramid_options, progress);
-  const int max_zoom = static_cast<int>(pyramid.levels.size()) - 1;
-  if (pyramid.levels.back().tiles.empty()) {
-    throw Error(ErrorCode::Input, options.inputs.front() +
-                                      ": no triangle can be built; expected at least one 2 x 2 "
-                                      "block of valid (not nodata) pixels");
+  // Levels of detail and the triangles of every tile, coarsest zoom first.
+  std::vector<ZoomContent> zooms;
+  GridPyramid pyramid;               // grid: owns the meshes
+  std::vector<Level> levels;         // clusters: owns the meshes
+  if (options.lod == LodMethod::Grid) {
+    GridPyramidOptions pyramid_options;
+    pyramid_options.tile_cells = options.tile_cells;
+    pyramid_options.max_zoom = options.max_zoom;
+    pyramid = buildGridPyramid(dem, pyramid_options, progress);
+    if (pyramid.levels.back().tiles.empty()) {
+      throw Error(ErrorCode::Input, options.inputs.front() +
+                                        ": no triangle can be built; expected at least one 2 x 2 "
+                                        "block of valid (not nodata) pixels");
+    }
+    for (PyramidLevel& level : pyramid.levels) {
+      zooms.push_back({level.zoom, level.step, 0, &level.mesh, std::move(level.tiles), level.max_error_m,
+                       level.rms_error_m});
+    }
+  } else {
+    ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress);
+    const TileFrame frame(options.scheme, dem);
+    const ZoomPlan plan = planZooms(frame, finest.mesh, options.tile_triangles, options.max_zoom);
+    progress.note("zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) + " (" +
+                  std::string(tileSchemeName(options.scheme)) + "), clusters assigned by " +
+                  std::string(assignmentName(options.assignment)));
+    LevelOptions level_options;
+    level_options.clusters_per_level = plan.clusters_per_level;
+    level_options.level_ratio = options.level_ratio;
+    if (options.level_error_growth > 0) {
+      level_options.level_error_growth = options.level_error_growth;
+      level_options.first_budget_m = options.tin_max_error_m * options.level_error_growth;
+    }
+    if (plan.max_zoom > plan.min_zoom) {
+      level_options.coarser_levels = plan.max_zoom - plan.min_zoom;
+      levels = buildLevels(dem, std::move(finest.mesh), level_options, std::move(finest.constrained_edges), progress);
+    } else {
+      levels.emplace_back();
+      levels[0].mesh = std::move(finest.mesh);
+      levels[0].error = measureTin(dem, levels[0].mesh);
+    }
+    progress.beginStage("assigning clusters to tiles", levels.size());
+    std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;
+    for (std::size_t l = 0; l < levels.size(); ++l) {
+      const auto zoom = static_cast<std::int32_t>(plan.max_zoom - static_cast<std::int32_t>(l));
+      ZoomContent content;
+      content.zoom = zoom;
+      content.clusters = static_cast<std::size_t>(levels[l].partition.cluster_count);
+      content.mesh = &levels[l].mesh;
+      content.max_error_m = levels[l].error.max_error_m;
+      content.rms_error_m = levels[l].error.rms_error_m;
+      for (TileFaces& tile : assignClusters(frame, levels[l], zoom, options.assignment, finer_cluster_tiles,
+                                            own_cluster_tiles)) {
+        PyramidTile pyramid_tile;
+        pyramid_tile.key = tile.key;
+        pyramid_tile.triangle_indices = std::move(tile.triangle_indices);
+        content.tiles.push_back(std::move(pyramid_tile));
+      }
+      measureTiles(dem, levels[l].mesh, content.tiles);
+      finer_cluster_tiles = std::move(own_cluster_tiles);
+      zooms.push_back(std::move(content));
+      progress.advance();
+    }
+    progress.endStage();
+    std::reverse(zooms.begin(), zooms.end());
   }
+  const int max_zoom = zooms.back().zoom;
 
   GlbOptions glb;
   glb.draco = options.draco;
@@ -235,17 +368,18 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   glb.generator = std::string("terratiles ") + kVersion;
 
   std::size_t total_tiles = 0;
-  for (const auto& level : pyramid.levels) total_tiles += level.tiles.size();
+  for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
   progress.beginStage("writing tiles", total_tiles);
   std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
-  for (const PyramidLevel& level : pyramid.levels) {
-    const PlacedLevel placed = placeLevel(dem, level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
+  for (const ZoomContent& level : zooms) {
+    const PlacedLevel placed = placeLevel(dem, *level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
     ZoomSummary zoom_summary;
     zoom_summary.zoom = level.zoom;
     zoom_summary.step_pixels = level.step;
+    zoom_summary.clusters = level.clusters;
     zoom_summary.tiles = level.tiles.size();
-    zoom_summary.vertices = level.mesh.vertices.size();
-    zoom_summary.triangles = level.mesh.triangleCount();
+    zoom_summary.vertices = level.mesh->vertices.size();
+    zoom_summary.triangles = level.mesh->triangleCount();
     zoom_summary.max_error_m = level.max_error_m;
     zoom_summary.rms_error_m = level.rms_error_m;
 
@@ -280,7 +414,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   Tileset tileset;
   tileset.generator = glb.generator;
-  tileset.root = buildTree(nodes, max_zoom);
+  tileset.root = buildTree(nodes);
   finalizeTree(tileset.root);
   // The error of drawing nothing at all: at least the data's size, the larger of the
   // footprint's diagonal (chord between the root region's corners) and the relief. A value
@@ -298,13 +432,27 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     tileset.geometric_error_m = std::max(
         {tileset.root.geometric_error_m, diagonal_m, r.max_height_m - r.min_height_m});
   }
+  // A tile without content (a common ancestor above the coarsest zoom's tiles) draws nothing:
+  // its error is that of drawing nothing, so a viewer always refines it.
+  {
+    std::vector<TileNode*> open{&tileset.root};
+    while (!open.empty()) {
+      TileNode* node = open.back();
+      open.pop_back();
+      if (node->content_uri.empty()) node->geometric_error_m = tileset.geometric_error_m;
+      for (TileNode& child : node->children) open.push_back(&child);
+    }
+  }
   // Record per zoom the largest geometricError written (after finalizeTree raised them).
   std::vector<const TileNode*> stack{&tileset.root};
   while (!stack.empty()) {
     const TileNode* node = stack.back();
     stack.pop_back();
-    auto& z = summary.zooms[static_cast<std::size_t>(node->key.zoom)];
-    z.geometric_error_m = std::max(z.geometric_error_m, node->geometric_error_m);
+    for (ZoomSummary& z : summary.zooms) {
+      if (z.zoom == node->key.zoom && !node->content_uri.empty()) {
+        z.geometric_error_m = std::max(z.geometric_error_m, node->geometric_error_m);
+      }
+    }
     for (const TileNode& child : node->children) stack.push_back(&child);
   }
 

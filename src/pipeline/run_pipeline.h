@@ -8,6 +8,9 @@
 #include <vector>
 
 #include "src/base/progress.h"
+#include "src/tiling/assign_clusters.h"
+#include "src/tiling/tile_scheme.h"
+#include "src/tin/build_tin.h"
 
 namespace terratiles {
 
@@ -16,12 +19,25 @@ enum class HeightReference {
   Ellipsoidal,  // heights already above the WGS84 ellipsoid: use as they are
 };
 
+enum class LodMethod {
+  Clusters,  // the paper's method: greedy TIN, cluster levels, clusters assigned to web tiles
+  Grid,      // a decimated pixel grid per zoom in the local pixel scheme (for comparison)
+};
+
 struct BuildOptions {
   std::vector<std::string> inputs;
   std::string output_dir;
   bool force = false;
-  std::int32_t tile_cells = 128;       // grid cells per tile side
-  std::int32_t max_zoom = -1;          // -1: enough zooms for one root tile
+  LodMethod lod = LodMethod::Clusters;
+  TileSchemeKind scheme = TileSchemeKind::WebMercator;  // clusters only
+  Assignment assignment = Assignment::Merge;            // clusters only
+  double tin_max_error_m = 0.5;        // clusters: the finest TIN's bound
+  std::int32_t tile_triangles = 16384; // clusters: finest tiles hold about this many
+  double level_ratio = 0.5;            // clusters: edges kept per simplification
+  double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)
+  std::string constraints;             // clusters: break lines (OGR file), or empty
+  std::int32_t tile_cells = 128;       // grid: cells per tile side
+  std::int32_t max_zoom = -1;          // -1: chosen from the data
   HeightReference heights = HeightReference::Orthometric;
   std::string geoid_path;              // empty: EGM96 from Debian's proj-data
   bool draco = true;
@@ -30,7 +46,8 @@ struct BuildOptions {
 
 struct ZoomSummary {
   std::int32_t zoom = 0;
-  std::int32_t step_pixels = 1;
+  std::int32_t step_pixels = 0;  // grid: pixels between samples; clusters: 0
+  std::size_t clusters = 0;      // clusters: the level's own clusters
   std::size_t tiles = 0;
   std::size_t vertices = 0;
   std::size_t triangles = 0;
@@ -63,5 +80,10 @@ struct BuildSummary {
 };
 
 BuildSummary runPipeline(const BuildOptions& options, Progress& progress);
+
+// The finest TIN (greedy insertion to max_error_m) with the break lines of constraints_path
+// (an OGR vector file; empty: none) as constrained edges; notes what was read on `progress`.
+ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std::string& constraints_path,
+                              Progress& progress);
 
 }  // namespace terratiles

@@ -85,10 +85,11 @@ void checkTile(const json& tile, const fs::path& root_dir, double parent_error, 
       REQUIRE(h >= region[4].get<double>() - tolerance_m);
       REQUIRE(h <= region[5].get<double>() + tolerance_m);
       if (heights.geoid) h -= heights.geoid->undulationAt(lon, lat).value();
-      // Within the DEM's heights to the quantisation error: sqrt(3)/2 of the widest step used
-      // here, 1/8 m for SRTM's 100 km root tile (wider than 2^20 steps of 1/128 m).
-      REQUIRE(h >= heights.min_m - 0.11);
-      REQUIRE(h <= heights.max_m + 0.11);
+      // Within the DEM's heights to the quantisation error (sqrt(3)/2 of the widest step used
+      // here, 1/8 m for SRTM's 100 km root tile, wider than 2^20 steps of 1/128 m) and to the
+      // tile's error: simplification may place a vertex off the DEM's pixels, within budget.
+      REQUIRE(h >= heights.min_m - 0.11 - error);
+      REQUIRE(h <= heights.max_m + 0.11 + error);
     }
   }
   if (tile.contains("children")) {
@@ -161,8 +162,10 @@ TEST_SUITE("integration") {
     const BuiltTileset built =
         buildAndCheck({test::sharedData("ch_dhm25_interlaken_25m_2056.tif")}, dir.path() / "out");
     checkRootCentre(built.tileset, 46.707, 7.872, 0.01);
-    CHECK(built.stats.depth == 2);  // 349 cells, 128 per tile: zooms 0..2
-    CHECK(built.stats.contents >= 1 + 2 + 6);
+    // 95,099 triangles at 0.5 m, about 16,384 per finest tile: webmercator zoom 13 (8 tiles)
+    // and zoom 12 (3 tiles), under a content-less common ancestor.
+    CHECK(built.stats.depth >= 2);
+    CHECK(built.stats.contents >= 3 + 8);
   }
 
   TEST_CASE("the geoid lifts Swiss LN02 heights by the undulation and CHGeo2004 can replace EGM96") {

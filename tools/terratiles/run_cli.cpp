@@ -76,9 +76,9 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
   for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
-  text << "  zoom  step  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
+  text << "  zoom clusters  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
   for (const ZoomSummary& z : s.zooms) {
-    text << "  " << std::setw(4) << z.zoom << std::setw(6) << z.step_pixels << std::setw(7)
+    text << "  " << std::setw(4) << z.zoom << std::setw(9) << (z.step_pixels ? z.step_pixels : z.clusters) << std::setw(7)
          << z.tiles << std::setw(12) << z.triangles << std::setw(13) << z.bytes
          << std::setprecision(3) << std::setw(12) << z.max_error_m << std::setw(12)
          << z.rms_error_m << std::setw(13) << z.geometric_error_m << "\n";
@@ -169,34 +169,6 @@ struct TinCommandOptions {
   bool force = false;
 };
 
-// The finest TIN, with the break lines of `constraints_path` (when given) as constrained
-// edges; reports what was read on `err` unless quiet.
-ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std::string& constraints_path,
-                              Progress& progress, bool quiet, std::ostream& err) {
-  BreakLines lines;
-  if (!constraints_path.empty()) {
-    progress.beginStage("reading break lines", 0);
-    lines = readBreakLines(constraints_path, dem);
-    progress.endStage();
-    if (lines.segments.empty()) {
-      throw Error(ErrorCode::Input, constraints_path + ": no line or polygon of it crosses the DEM's valid data (" +
-                                        std::to_string(lines.features) + " features with lines, " +
-                                        std::to_string(lines.segments_read) +
-                                        " segments); expected break lines over the DEM (in any CRS)");
-    }
-  }
-  TinOptions options;
-  options.max_error_m = max_error_m;
-  ConstrainedTin tin = buildConstrainedTin(dem, options, lines.segments, progress);
-  if (!quiet && !constraints_path.empty()) {
-    err << "terratiles: break lines from " << constraints_path << ": " << lines.features << " features, "
-        << lines.segments_read << " segments read, " << lines.pieces_left_out
-        << " cut or left out (outside the grid or over nodata), " << tin.segments_bent
-        << " bent where they crossed another line, " << tin.constrained_edges.size() << " constrained TIN edges\n";
-  }
-  return tin;
-}
-
 // `terratiles tin`: DEM -> greedy-insertion TIN -> OFF/OBJ/PLY in the DEM's CRS.
 void runTinCommand(const TinCommandOptions& options, Progress& progress, bool quiet, std::ostream& err) {
   const auto start = std::chrono::steady_clock::now();
@@ -208,7 +180,7 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   progress.beginStage("reading DEM", 0);
   DemGrid dem = readDem(options.inputs);
   progress.endStage();
-  TinMesh mesh = buildFinestTin(dem, options.max_error_m, options.constraints, progress, quiet, err).mesh;
+  TinMesh mesh = buildFinestTin(dem, options.max_error_m, options.constraints, progress).mesh;
   progress.beginStage("checking every pixel", 0);
   const TinErrorStatistics errors = measureTin(dem, mesh);
   progress.endStage();
@@ -258,7 +230,7 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   progress.beginStage("reading DEM", 0);
   const DemGrid dem = readDem(options.inputs);
   progress.endStage();
-  ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress, quiet, err);
+  ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress);
   TinMesh tin = std::move(finest.mesh);
   options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
   if (options.level_error_growth > 0) {
@@ -365,13 +337,47 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->required();
   build_command->add_flag("-f,--force", build.force,
                           "Replace OUTDIR when it holds a previous output (tileset.json)");
+  std::string lod_choice = "clusters", scheme_choice = "webmercator", assign_choice = "merge";
+  build_command
+      ->add_option("--lod", lod_choice,
+                   "Levels of detail: clusters (greedy TIN, cluster levels, clusters assigned to web tiles: the "
+                   "paper's method) or grid (a decimated pixel grid per zoom, local pixel tiles; for comparison)")
+      ->check(CLI::IsMember({"clusters", "grid"}))
+      ->capture_default_str();
+  build_command
+      ->add_option("--scheme", scheme_choice,
+                   "Tile pyramid: webmercator (EPSG:3857 XYZ), geographic (EPSG:4326, 2 x 1 at zoom 0) or local "
+                   "(the DEM's CRS, origin at its lower-left corner)")
+      ->check(CLI::IsMember({"webmercator", "geographic", "local"}))
+      ->capture_default_str();
+  build_command
+      ->add_option("--assign", assign_choice,
+                   "Clusters to tiles: merge (both cluster sets of a level, no holes), duplicate (every tile a "
+                   "cluster crosses) or centroid (the tile of its centroid; leaves holes, for comparison)")
+      ->check(CLI::IsMember({"merge", "duplicate", "centroid"}))
+      ->capture_default_str();
+  build_command->add_option("--tin-max-error", build.tin_max_error_m, "The finest TIN's max vertical error, metres")
+      ->capture_default_str();
+  build_command
+      ->add_option("--tile-triangles", build.tile_triangles,
+                   "The finest zoom is the first whose tiles hold at most about N triangles of the finest TIN")
+      ->capture_default_str();
+  build_command
+      ->add_option("--level-ratio", build.level_ratio, "Edges a simplification keeps in every cluster (paper: 0.5)")
+      ->capture_default_str();
+  build_command
+      ->add_option("--level-error-growth", build.level_error_growth,
+                   "Error budget of a level: tin-max-error * G^level metres (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  build_command->add_option("--constraints", build.constraints, kConstraintsHelp);
   build_command
       ->add_option("--tile-cells", build.tile_cells,
-                   "Grid cells per tile side at every zoom; a tile holds up to 2*N^2 triangles")
+                   "--lod grid: grid cells per tile side at every zoom; a tile holds up to 2*N^2 triangles")
       ->capture_default_str();
   build_command
       ->add_option("--max-zoom", build.max_zoom,
-                   "Finest zoom (-1: as many zooms as one root tile needs)")
+                   "Finest zoom (-1: from the data: --tile-triangles, or for --lod grid one root tile)")
       ->capture_default_str();
   std::string heights_choice = "orthometric";
   build_command
@@ -528,6 +534,9 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     return 0;
   }
   if (build_command->parsed()) {
+    build.lod = lod_choice == "grid" ? LodMethod::Grid : LodMethod::Clusters;
+    build.scheme = parseTileSchemeKind(scheme_choice);
+    build.assignment = parseAssignment(assign_choice);
     if (heights_choice == "ellipsoidal") {
       if (!build.geoid_path.empty()) {
         throw Error(ErrorCode::Usage, "--geoid and --heights ellipsoidal exclude each other "

@@ -1,0 +1,220 @@
+#include "src/tiling/assign_clusters.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+#include <string>
+
+#include "src/base/error.h"
+#include "src/geo/crs_transform.h"
+
+namespace terratiles {
+
+Assignment parseAssignment(std::string_view text) {
+  if (text == "centroid") return Assignment::Centroid;
+  if (text == "duplicate") return Assignment::Duplicate;
+  if (text == "merge") return Assignment::Merge;
+  throw Error(ErrorCode::Usage, "--assign is '" + std::string(text) + "'; expected merge, duplicate or centroid");
+}
+
+std::string_view assignmentName(Assignment assignment) {
+  switch (assignment) {
+    case Assignment::Centroid: return "centroid";
+    case Assignment::Duplicate: return "duplicate";
+    case Assignment::Merge: return "merge";
+  }
+  return "merge";
+}
+
+TileFrame::TileFrame(TileSchemeKind kind, const DemGrid& dem) : kind_(kind), dem_(dem) {
+  if (kind == TileSchemeKind::Local) {
+    const TileBounds extent{dem.origin_x, dem.origin_y - dem.height * dem.pixel_size_y,
+                            dem.origin_x + dem.width * dem.pixel_size_x, dem.origin_y};
+    local_ = makeLocalTileScheme(extent);
+  } else {
+    to_wgs84_ = std::make_unique<CrsToWgs84>(dem.crs_wkt);
+  }
+}
+
+TileFrame::~TileFrame() = default;
+
+std::vector<std::array<double, 2>> TileFrame::toScheme(std::span<const GridPoint> points) const {
+  std::vector<std::array<double, 2>> out(points.size());
+  if (kind_ == TileSchemeKind::Local) {
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const CrsPoint p = dem_.pixelCentre(points[i].col, points[i].row);
+      out[i] = {p.x, p.y};
+    }
+    return out;
+  }
+  std::vector<CrsPoint> crs(points.size());
+  std::vector<GeodeticPoint> geodetic(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    crs[i] = dem_.pixelCentre(points[i].col, points[i].row);
+    geodetic[i].height_m = points[i].height_m;
+  }
+  to_wgs84_->transform(crs, geodetic);
+  for (std::size_t i = 0; i < points.size(); ++i) out[i] = {geodetic[i].lon_deg, geodetic[i].lat_deg};
+  return out;
+}
+
+TileKey TileFrame::tileAt(std::array<double, 2> point, std::int32_t zoom) const {
+  if (kind_ == TileSchemeKind::Local) {
+    // Centroids of clusters are inside the extent; clamp rounding at its edges.
+    const TileBounds root = tileBounds(local_, {0, 0, 0});
+    return terratiles::tileAt(local_, std::clamp(point[0], root.west, root.east),
+                              std::clamp(point[1], root.south, root.north), zoom);
+  }
+  return terratiles::tileAt(kind_, point[0], point[1], zoom);
+}
+
+std::vector<TileKey> TileFrame::tilesIntersecting(const TileBounds& box, std::int32_t zoom) const {
+  if (kind_ == TileSchemeKind::Local) return terratiles::tilesIntersecting(local_, box, zoom);
+  return terratiles::tilesIntersecting(kind_, LonLatBox{box.west, box.south, box.east, box.north}, zoom);
+}
+
+namespace {
+
+TileBounds boundsOf(const std::vector<std::array<double, 2>>& points) {
+  TileBounds box{1e300, 1e300, -1e300, -1e300};
+  for (const auto& p : points) {
+    box.west = std::min(box.west, p[0]);
+    box.east = std::max(box.east, p[0]);
+    box.south = std::min(box.south, p[1]);
+    box.north = std::max(box.north, p[1]);
+  }
+  return box;
+}
+
+}  // namespace
+
+ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
+                   std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
+  if (tile_triangles < 64) {
+    throw Error(ErrorCode::Usage, "--tile-triangles is " + std::to_string(tile_triangles) + "; expected at least 64");
+  }
+  const TileBounds box = boundsOf(frame.toScheme(finest.vertices));
+  const auto tilesAt = [&](std::int32_t zoom) { return frame.tilesIntersecting(box, zoom).size(); };
+  ZoomPlan plan;
+  if (forced_max_zoom >= 0) {
+    plan.max_zoom = forced_max_zoom;
+  } else {
+    plan.max_zoom = 0;
+    while (plan.max_zoom < 24 &&
+           static_cast<double>(finest.triangleCount()) / static_cast<double>(tilesAt(plan.max_zoom)) > tile_triangles) {
+      ++plan.max_zoom;
+    }
+  }
+  plan.min_zoom = plan.max_zoom;
+  while (plan.min_zoom > 0 && tilesAt(plan.min_zoom) > 2) --plan.min_zoom;
+  for (std::int32_t zoom = plan.max_zoom; zoom > plan.min_zoom; --zoom) {
+    plan.clusters_per_level.push_back(clusters_per_tile * static_cast<std::int32_t>(tilesAt(zoom)));
+  }
+  return plan;
+}
+
+std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level, std::int32_t zoom,
+                                      Assignment assignment, const std::vector<TileKey>& finer_cluster_tiles,
+                                      std::vector<TileKey>& own_cluster_tiles) {
+  const TinMesh& mesh = level.mesh;
+  const std::vector<std::array<double, 2>> scheme = frame.toScheme(mesh.vertices);
+  const std::size_t face_count = mesh.triangleCount();
+  const auto& idx = mesh.triangle_indices;
+  const auto corner = [&](std::size_t f, int k) { return scheme[idx[3 * f + static_cast<std::size_t>(k)]]; };
+
+  // The tiles each face's bounding box shares area with (CSR).
+  std::vector<std::size_t> tile_offset(face_count + 1, 0);
+  std::vector<TileKey> face_tiles;
+  face_tiles.reserve(face_count + face_count / 4);
+  for (std::size_t f = 0; f < face_count; ++f) {
+    TileBounds box{1e300, 1e300, -1e300, -1e300};
+    for (int k = 0; k < 3; ++k) {
+      const auto p = corner(f, k);
+      box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+    }
+    for (const TileKey& key : frame.tilesIntersecting(box, zoom)) face_tiles.push_back(key);
+    tile_offset[f + 1] = face_tiles.size();
+  }
+
+  // Own clusters: the tile of each one's centroid.
+  const FacePartition& own = level.partition;
+  own_cluster_tiles.assign(static_cast<std::size_t>(own.cluster_count), TileKey{});
+  if (own.cluster_count > 0) {
+    std::vector<std::array<double, 3>> sums(static_cast<std::size_t>(own.cluster_count), {0, 0, 0});
+    for (std::size_t f = 0; f < face_count; ++f) {
+      const auto a = corner(f, 0), b = corner(f, 1), c = corner(f, 2);
+      // Area weight, with a floor so that a cluster of slivers still has a centroid.
+      const double area = std::fabs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) + 1e-30;
+      auto& sum = sums[static_cast<std::size_t>(own.cluster_of_face[f])];
+      sum[0] += area * (a[0] + b[0] + c[0]) / 3;
+      sum[1] += area * (a[1] + b[1] + c[1]) / 3;
+      sum[2] += area;
+    }
+    for (std::size_t c = 0; c < sums.size(); ++c) {
+      own_cluster_tiles[c] = frame.tileAt({sums[c][0] / sums[c][2], sums[c][1] / sums[c][2]}, zoom);
+    }
+  }
+  // Inherited clusters: the parent of the finer tile that took them.
+  const FacePartition& inherited = level.inherited_partition;
+  const bool has_own = own.cluster_count > 0;
+  const bool has_inherited = inherited.cluster_count > 0 && !finer_cluster_tiles.empty();
+  // A single level (no coarser, no finer zoom) has no clusters: faces go by themselves.
+  const bool by_face = !has_own && !has_inherited;
+  const auto inheritedTile = [&](std::size_t f) {
+    return finer_cluster_tiles[static_cast<std::size_t>(inherited.cluster_of_face[f])].parent();
+  };
+  // Duplicate: every tile a cluster's faces touch.
+  std::vector<std::vector<TileKey>> crossed;
+  if (assignment == Assignment::Duplicate && !by_face) {
+    const FacePartition& clusters = has_own ? own : inherited;
+    std::vector<std::set<std::pair<std::int32_t, std::int32_t>>> sets(static_cast<std::size_t>(clusters.cluster_count));
+    for (std::size_t f = 0; f < face_count; ++f) {
+      auto& set = sets[static_cast<std::size_t>(clusters.cluster_of_face[f])];
+      for (std::size_t i = tile_offset[f]; i < tile_offset[f + 1]; ++i) set.insert({face_tiles[i].y, face_tiles[i].x});
+    }
+    crossed.resize(sets.size());
+    for (std::size_t c = 0; c < sets.size(); ++c) {
+      for (const auto& [y, x] : sets[c]) crossed[c].push_back({zoom, x, y});
+    }
+  }
+
+  std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::uint32_t>> faces_of_tile;  // (y, x)
+  std::vector<TileKey> targets;
+  for (std::size_t f = 0; f < face_count; ++f) {
+    targets.clear();
+    if (by_face) {
+      targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),
+                     face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f + 1]));
+    } else switch (assignment) {
+      case Assignment::Centroid:
+        targets.push_back(has_own ? own_cluster_tiles[static_cast<std::size_t>(own.cluster_of_face[f])] : inheritedTile(f));
+        break;
+      case Assignment::Duplicate: {
+        const std::int32_t cluster = has_own ? own.cluster_of_face[f] : inherited.cluster_of_face[f];
+        targets = crossed[static_cast<std::size_t>(cluster)];
+        break;
+      }
+      case Assignment::Merge:
+        if (has_own) targets.push_back(own_cluster_tiles[static_cast<std::size_t>(own.cluster_of_face[f])]);
+        if (has_inherited) targets.push_back(inheritedTile(f));
+        targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),
+                       face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f + 1]));
+        break;
+    }
+    std::sort(targets.begin(), targets.end(), [](const TileKey& l, const TileKey& r) {
+      return std::tie(l.y, l.x) < std::tie(r.y, r.x);
+    });
+    targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
+    for (const TileKey& key : targets) {
+      auto& list = faces_of_tile[{key.y, key.x}];
+      list.insert(list.end(), {idx[3 * f], idx[3 * f + 1], idx[3 * f + 2]});
+    }
+  }
+  std::vector<TileFaces> tiles;
+  tiles.reserve(faces_of_tile.size());
+  for (auto& [yx, triangles] : faces_of_tile) tiles.push_back({TileKey{zoom, yx.second, yx.first}, std::move(triangles)});
+  return tiles;
+}
+
+}  // namespace terratiles

@@ -1,0 +1,96 @@
+#pragma once
+// Clusters to web tiles (DESIGN.md section 4, paper 3.5): which faces of each level of detail
+// each tile of its zoom carries.
+//
+// Level l of the cluster LoD loop (src/lod/build_levels.h) is shown at zoom max_zoom - l. Its
+// faces carry two cluster ids: `own`, the partition that split level l to make the coarser
+// level (its borders are locked in level l - 1 ... and exist in the coarser level), and
+// `inherited`, the finer level's partition carried over (its borders exist in the finer
+// level). Strategies:
+//   centroid   a tile carries the own clusters whose centroid it holds (the paper's first
+//              idea; for comparison: it leaves holes where a cluster reaches into a tile
+//              whose neighbour took it).
+//   duplicate  a tile carries every own cluster that crosses it (paper 3.5.2).
+//   merge      (default; paper 3.5.3, "boundaries merge") a tile carries the own clusters
+//              whose centroid it holds AND the inherited clusters whose finer tile (at zoom
+//              + 1) is one of its children, so its content outline follows both sets of
+//              borders: the inherited ones where it meets finer tiles (the union of a tile's
+//              inherited clusters is exactly the union of its children's own clusters,
+//              border vertex for border vertex) and the own ones where it meets coarser tiles
+//              (for the same reason one zoom up). It also carries every face that crosses its
+//              square, so a drawn tile always covers its whole square: no holes in any cut.
+// A cluster's centroid is the area-weighted centroid of its faces in scheme coordinates.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "src/dem/dem_grid.h"
+#include "src/lod/build_levels.h"
+#include "src/tiling/tile_key.h"
+#include "src/tiling/tile_scheme.h"
+#include "src/tin/tin_mesh.h"
+
+namespace terratiles {
+
+class CrsToWgs84;
+
+enum class Assignment { Centroid, Duplicate, Merge };
+// "centroid", "duplicate", "merge"; Error(Usage) otherwise.
+Assignment parseAssignment(std::string_view text);
+std::string_view assignmentName(Assignment assignment);
+
+// Where a DEM's grid sits in a tile scheme: scheme coordinates of grid points (lon/lat
+// degrees for the web schemes, through the same CRS -> WGS84 transformation as the
+// placement; CRS units for local, whose zoom-0 tile is the DEM's extent) and tile lookups.
+class TileFrame {
+ public:
+  TileFrame(TileSchemeKind kind, const DemGrid& dem);
+  ~TileFrame();
+  TileFrame(const TileFrame&) = delete;
+  TileFrame& operator=(const TileFrame&) = delete;
+
+  TileSchemeKind kind() const { return kind_; }
+  const LocalTileScheme& local() const { return local_; }
+  std::vector<std::array<double, 2>> toScheme(std::span<const GridPoint> points) const;
+  TileKey tileAt(std::array<double, 2> point, std::int32_t zoom) const;
+  // Tiles sharing area with the box (west, south, east, north in scheme coordinates).
+  std::vector<TileKey> tilesIntersecting(const TileBounds& box, std::int32_t zoom) const;
+
+ private:
+  TileSchemeKind kind_;
+  const DemGrid& dem_;
+  LocalTileScheme local_;
+  std::unique_ptr<CrsToWgs84> to_wgs84_;
+};
+
+struct ZoomPlan {
+  std::int32_t max_zoom = 0;  // shows the finest TIN
+  std::int32_t min_zoom = 0;  // the coarsest level
+  // Clusters that split level l (zoom max_zoom - l): clusters_per_tile per tile of its zoom.
+  std::vector<std::int32_t> clusters_per_level;
+};
+
+// max_zoom: the first zoom whose tiles over the data hold at most `tile_triangles` of the
+// finest TIN's triangles each (or `forced_max_zoom` when >= 0); min_zoom: the finest zoom at
+// which the data spans at most two tiles (never above max_zoom).
+ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
+                   std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4);
+
+struct TileFaces {
+  TileKey key;
+  std::vector<std::uint32_t> triangle_indices;  // into the level's mesh vertices
+};
+
+// The tiles of one zoom, sorted by (y, x). own_cluster_tiles: per cluster of level.partition
+// (this zoom's own clusters), the tile holding its centroid, filled here for the next coarser
+// zoom; finer_cluster_tiles: the same from the finer zoom (for level.inherited_partition),
+// empty for the finest zoom.
+std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level, std::int32_t zoom,
+                                      Assignment assignment, const std::vector<TileKey>& finer_cluster_tiles,
+                                      std::vector<TileKey>& own_cluster_tiles);
+
+}  // namespace terratiles
