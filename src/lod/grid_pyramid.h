@@ -34,6 +34,10 @@ struct PyramidTile {
   double max_error_m = 0;   // max |mesh - DEM| over the valid pixels the tile covers
   double rms_error_m = 0;
   std::size_t measured_pixels = 0;
+  // Cluster levels: max |content - the next finer zoom's surface| over the pixels both cover,
+  // so that where a viewer draws both (overlapping contents) they agree within the
+  // geometricError (0 for the finest zoom and the grid pyramid).
+  double finer_difference_m = 0;
 };
 
 struct PyramidLevel {

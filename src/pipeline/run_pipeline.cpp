@@ -4,10 +4,13 @@
 
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <cmath>
 #include <map>
 #include <numbers>
 #include <optional>
+
+#include <nlohmann/json.hpp>
 
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
@@ -105,6 +108,7 @@ struct EncodedTile {
   std::vector<std::uint8_t> glb;
   Region region;
   std::size_t vertices = 0;
+  double position_step_m = 0;  // the quantisation step Draco used (wider for wide tiles)
 };
 
 // One tile's content: its vertices relative to an origin on the quantisation grid, in the
@@ -149,6 +153,7 @@ EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const
   // The region must hold the decoded content: grow it by the quantisation step (decoded
   // positions are within half a step per axis, sqrt(3)/2 step in all).
   const double grow_m = encoded.position_step_m;
+  out.position_step_m = encoded.position_step_m;
   if (grow_m > 0) {
     constexpr double kMinimumRadius_m = 6.3e6;  // below any WGS84 radius of curvature
     const double grow_lat = grow_m / kMinimumRadius_m;
@@ -202,10 +207,13 @@ struct ZoomContent {
 
 // Per tile: max and RMS |content - DEM| over the valid pixels its triangles cover (a pixel on
 // an edge between two of its triangles counts twice in the RMS).
-void measureTiles(const DemGrid& dem, const TinMesh& mesh, std::vector<PyramidTile>& tiles) {
+// finer_surface: the next finer zoom's height at every pixel (NaN where it has none), or
+// empty.
+void measureTiles(const DemGrid& dem, const TinMesh& mesh, std::vector<PyramidTile>& tiles,
+                  const std::vector<float>& finer_surface) {
   tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
     PyramidTile& tile = tiles[i];
-    double max_error = 0, sum_squares = 0;
+    double max_error = 0, sum_squares = 0, finer_difference = 0;
     std::size_t count = 0;
     const auto& idx = tile.triangle_indices;
     for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
@@ -213,6 +221,9 @@ void measureTiles(const DemGrid& dem, const TinMesh& mesh, std::vector<PyramidTi
                           [&](std::size_t pixel, double surface_m) {
                             const float h = dem.heights_m[pixel];
                             if (std::isnan(h)) return true;
+                            if (!finer_surface.empty() && !std::isnan(finer_surface[pixel])) {
+                              finer_difference = std::max(finer_difference, std::fabs(surface_m - finer_surface[pixel]));
+                            }
                             const double error = std::fabs(surface_m - h);
                             max_error = std::max(max_error, error);
                             sum_squares += error * error;
@@ -223,7 +234,22 @@ void measureTiles(const DemGrid& dem, const TinMesh& mesh, std::vector<PyramidTi
     tile.max_error_m = max_error;
     tile.rms_error_m = count ? std::sqrt(sum_squares / static_cast<double>(count)) : 0;
     tile.measured_pixels = count;
+    tile.finer_difference_m = finer_difference;
   });
+}
+
+// A level's height at every pixel centre it covers (NaN elsewhere).
+std::vector<float> levelSurface(const DemGrid& dem, const TinMesh& mesh) {
+  std::vector<float> surface(dem.pixelCount(), std::nanf(""));
+  const auto& idx = mesh.triangle_indices;
+  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
+                        [&](std::size_t pixel, double surface_m) {
+                          surface[pixel] = static_cast<float>(surface_m);
+                          return true;
+                        });
+  }
+  return surface;
 }
 
 }  // namespace
@@ -337,6 +363,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     }
     progress.beginStage("assigning clusters to tiles", levels.size());
     std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;
+    std::vector<float> finer_surface;
     for (std::size_t l = 0; l < levels.size(); ++l) {
       const auto zoom = static_cast<std::int32_t>(plan.max_zoom - static_cast<std::int32_t>(l));
       ZoomContent content;
@@ -352,7 +379,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         pyramid_tile.triangle_indices = std::move(tile.triangle_indices);
         content.tiles.push_back(std::move(pyramid_tile));
       }
-      measureTiles(dem, levels[l].mesh, content.tiles);
+      measureTiles(dem, levels[l].mesh, content.tiles, finer_surface);
+      if (l + 1 < levels.size()) finer_surface = levelSurface(dem, levels[l].mesh);
       finer_cluster_tiles = std::move(own_cluster_tiles);
       zooms.push_back(std::move(content));
       progress.advance();
@@ -371,6 +399,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
   progress.beginStage("writing tiles", total_tiles);
   std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
+  double widest_step_m = 0;
   for (const ZoomContent& level : zooms) {
     const PlacedLevel placed = placeLevel(dem, *level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
     ZoomSummary zoom_summary;
@@ -398,8 +427,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         node.key = tile.key;
         node.content_uri = "tiles/" + tile.key.path() + ".glb";
         node.region = encoded[i - begin].region;
-        node.geometric_error_m = tile.max_error_m;
+        // Measured: against the DEM and against the next finer zoom where both are drawn.
+        node.geometric_error_m = std::max(tile.max_error_m, tile.finer_difference_m);
         zoom_summary.bytes += output.writeFile(node.content_uri, encoded[i - begin].glb);
+        widest_step_m = std::max(widest_step_m, encoded[i - begin].position_step_m);
         nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
         progress.advance();
       }
@@ -456,6 +487,25 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     for (const TileNode& child : node->children) stack.push_back(&child);
   }
 
+  // What `terratiles check` needs to find the source again (not referenced by tileset.json).
+  {
+    nlohmann::json facts;
+    facts["generator"] = glb.generator;
+    std::vector<std::string> inputs;
+    for (const std::string& input : options.inputs) inputs.push_back(std::filesystem::absolute(input).string());
+    facts["inputs"] = inputs;
+    facts["crs"] = dem.crs_name;
+    facts["lod"] = options.lod == LodMethod::Grid ? "grid" : "clusters";
+    facts["scheme"] = options.lod == LodMethod::Grid ? "local pixels" : std::string(tileSchemeName(options.scheme));
+    facts["assign"] = std::string(assignmentName(options.assignment));
+    facts["tin_max_error_m"] = options.tin_max_error_m;
+    facts["heights"] = geoid ? "orthometric" : "ellipsoidal";
+    facts["geoid"] = geoid ? std::filesystem::absolute(options.geoid_path.empty() ? kDefaultGeoidPath
+                                                                                 : options.geoid_path).string()
+                           : std::string();
+    facts["position_step_m"] = std::max(options.position_step_m, widest_step_m);  // the widest any tile used
+    summary.bytes += output.writeFile("build.json", facts.dump(2) + "\n");
+  }
   // tileset.json last, then the whole directory moves into place.
   summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
   progress.throwIfCancelled();

@@ -27,6 +27,7 @@
 #include "formats/output_directory.h"
 #include "formats/tin/tin_file.h"
 #include "formats/vector/read_break_lines.h"
+#include "src/pipeline/check_output.h"
 #include "src/lod/build_levels.h"
 #include "src/tin/build_tin.h"
 #include "src/tin/measure_tin.h"
@@ -199,6 +200,9 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
     err << line << std::flush;
   }
 }
+
+// `terratiles check` found a violation (documented in its --help).
+constexpr int kCheckFailedExitCode = 5;
 
 constexpr const char* kConstraintsHelp =
     "Break lines: the lines and polygon rings of an OGR vector file (GeoJSON, GeoPackage, Shapefile; any CRS) are "
@@ -496,6 +500,18 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   levels_command->add_flag("-f,--force", levels.force, "Replace OUTDIR when it holds a previous levels output");
   addProgressOptions(*levels_command, quiet, progress_choice);
 
+  std::string check_dir;
+  CheckOptions check_options;
+  CLI::App* check_command = app.add_subcommand(
+      "check", "Prove a built OUTDIR seamless and honest: decode every tile and check coverage of random cuts, "
+               "overlap agreement between zooms and every geometricError against the source DEM");
+  check_command->footer(std::string(kExitCodes) + " 5: the check found violations.");
+  check_command->add_option("OUTDIR", check_dir, "A directory written by terratiles build")->required();
+  check_command->add_option("--cuts", check_options.cuts, "Random cuts of the tile tree to check")
+      ->capture_default_str();
+  check_command->add_option("--seed", check_options.seed, "Seed of the random cuts")->capture_default_str();
+  addProgressOptions(*check_command, quiet, progress_choice);
+
   try {
     std::vector<const char*> argv;
     for (const auto& arg : args) argv.push_back(arg.c_str());
@@ -517,6 +533,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     throw Error(ErrorCode::Usage, message + " (see 'terratiles" + command + " --help')");
   }
 
+  if (check_command->parsed()) {
+    Progress progress(progressModeFor(progress_choice, quiet));
+    InterruptGuard interrupt_guard;
+    const CheckReport report = checkOutput(check_dir, check_options, progress);
+    out << describeCheck(report) << std::flush;
+    return report.ok() ? 0 : kCheckFailedExitCode;
+  }
   if (levels_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
