@@ -409,6 +409,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     zoom_summary.tiles = level.tiles.size();
     zoom_summary.vertices = level.mesh->vertices.size();
     zoom_summary.triangles = level.mesh->triangleCount();
+    for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
     zoom_summary.max_error_m = level.max_error_m;
     zoom_summary.rms_error_m = level.rms_error_m;
 

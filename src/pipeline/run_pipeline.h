@@ -50,7 +50,8 @@ struct ZoomSummary {
   std::size_t clusters = 0;      // clusters: the level's own clusters
   std::size_t tiles = 0;
   std::size_t vertices = 0;
-  std::size_t triangles = 0;
+  std::size_t triangles = 0;       // of the level mesh
+  std::size_t tile_triangles = 0;  // summed over the zoom's tiles: / triangles = redundancy
   std::size_t bytes = 0;
   double max_error_m = 0;   // measured against the DEM
   double rms_error_m = 0;

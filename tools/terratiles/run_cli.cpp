@@ -77,10 +77,12 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
   for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
-  text << "  zoom clusters  tiles   triangles        bytes   max err m   rms err m  geomError m\n";
+  text << "  zoom clusters  tiles   triangles  redundancy        bytes   max err m   rms err m  geomError m\n";
   for (const ZoomSummary& z : s.zooms) {
     text << "  " << std::setw(4) << z.zoom << std::setw(9) << (z.step_pixels ? z.step_pixels : z.clusters) << std::setw(7)
-         << z.tiles << std::setw(12) << z.triangles << std::setw(13) << z.bytes
+         << z.tiles << std::setw(12) << z.triangles << std::setw(12) << std::setprecision(3)
+         << (z.triangles ? static_cast<double>(z.tile_triangles) / static_cast<double>(z.triangles) : 0.0)
+         << std::setw(13) << z.bytes
          << std::setprecision(3) << std::setw(12) << z.max_error_m << std::setw(12)
          << z.rms_error_m << std::setw(13) << z.geometric_error_m << "\n";
   }
