@@ -90,6 +90,12 @@ struct CheckTile {
   std::vector<float> slack;           // what quantisation may move that height by
   double measured_error_m = 0;        // max |content - DEM|
   double excess_error_m = 0;          // max |content - DEM| - slack
+  // The content's outline: its vertices on boundary edges (an edge of one triangle), in the
+  // grid frame and as decoded (ECEF), and those edges.
+  std::vector<std::array<double, 2>> vertex_grid;
+  std::vector<std::array<double, 3>> vertex_ecef;
+  std::vector<std::array<std::uint32_t, 2>> boundary_edges;
+  std::vector<std::uint32_t> boundary_vertices;
 };
 
 json readJson(const fs::path& path) {
@@ -228,6 +234,85 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   }
   tile.measured_error_m = max_error;
   tile.excess_error_m = std::max(0.0, max_excess);
+
+  // The outline, for vertex correspondence.
+  tile.vertex_grid.resize(n);
+  tile.vertex_ecef.resize(n);
+  for (std::size_t v = 0; v < n; ++v) {
+    tile.vertex_grid[v] = {grid[v].col, grid[v].row};
+    tile.vertex_ecef[v] = {mesh.translation[0] + mesh.positions[3 * v], mesh.translation[1] + mesh.positions[3 * v + 1],
+                           mesh.translation[2] + mesh.positions[3 * v + 2]};
+  }
+  std::vector<std::uint64_t> edges;
+  edges.reserve(idx.size());
+  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::uint32_t a = idx[t + k], b = idx[t + (k + 1) % 3];
+      edges.push_back((static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b));
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    if (j - i == 1) {
+      const auto a = static_cast<std::uint32_t>(edges[i] >> 32), b = static_cast<std::uint32_t>(edges[i] & 0xffffffffu);
+      tile.boundary_edges.push_back({a, b});
+      tile.boundary_vertices.insert(tile.boundary_vertices.end(), {a, b});
+    }
+    i = j;
+  }
+  std::sort(tile.boundary_vertices.begin(), tile.boundary_vertices.end());
+  tile.boundary_vertices.erase(std::unique(tile.boundary_vertices.begin(), tile.boundary_vertices.end()),
+                               tile.boundary_vertices.end());
+}
+
+// Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that
+// a viewer may draw side by side: an outline vertex of one that lies on an outline edge of
+// the other (within `tolerance_px`) must be a vertex of it, at the same decoded position
+// (within `same_position_m`). Returns the outline vertices that are not.
+std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, double tolerance_px,
+                                  double same_position_m) {
+  // The other tile's outline edges by 8-pixel cell.
+  constexpr double kCell = 8;
+  std::map<std::pair<std::int64_t, std::int64_t>, std::vector<std::size_t>> cells;
+  for (std::size_t e = 0; e < to.boundary_edges.size(); ++e) {
+    const auto& a = to.vertex_grid[to.boundary_edges[e][0]];
+    const auto& b = to.vertex_grid[to.boundary_edges[e][1]];
+    const auto c0 = static_cast<std::int64_t>(std::floor((std::min(a[0], b[0]) - tolerance_px) / kCell));
+    const auto c1 = static_cast<std::int64_t>(std::floor((std::max(a[0], b[0]) + tolerance_px) / kCell));
+    const auto r0 = static_cast<std::int64_t>(std::floor((std::min(a[1], b[1]) - tolerance_px) / kCell));
+    const auto r1 = static_cast<std::int64_t>(std::floor((std::max(a[1], b[1]) + tolerance_px) / kCell));
+    if ((c1 - c0 + 1) * (r1 - r0 + 1) > 4096) continue;  // a degenerate outline edge spanning the world
+    for (std::int64_t r = r0; r <= r1; ++r) {
+      for (std::int64_t c = c0; c <= c1; ++c) cells[{c, r}].push_back(e);
+    }
+  }
+  std::size_t missing = 0;
+  for (const std::uint32_t v : from.boundary_vertices) {
+    const auto& p = from.vertex_grid[v];
+    const auto found = cells.find({static_cast<std::int64_t>(std::floor(p[0] / kCell)),
+                                   static_cast<std::int64_t>(std::floor(p[1] / kCell))});
+    if (found == cells.end()) continue;
+    bool on_edge = false, matched = false;
+    for (const std::size_t e : found->second) {
+      const std::uint32_t ia = to.boundary_edges[e][0], ib = to.boundary_edges[e][1];
+      const auto& a = to.vertex_grid[ia];
+      const auto& b = to.vertex_grid[ib];
+      const double ex = b[0] - a[0], ey = b[1] - a[1];
+      const double length2 = ex * ex + ey * ey;
+      const double t = length2 > 0 ? std::clamp(((p[0] - a[0]) * ex + (p[1] - a[1]) * ey) / length2, 0.0, 1.0) : 0;
+      if (std::hypot(p[0] - (a[0] + t * ex), p[1] - (a[1] + t * ey)) > tolerance_px) continue;
+      on_edge = true;
+      for (const std::uint32_t end : {ia, ib}) {
+        const auto& q = to.vertex_ecef[end];
+        const auto& w = from.vertex_ecef[v];
+        if (std::hypot(q[0] - w[0], q[1] - w[1], q[2] - w[2]) <= same_position_m) matched = true;
+      }
+    }
+    if (on_edge && !matched) ++missing;
+  }
+  return missing;
 }
 
 bool touching(const TileKey& a, const TileKey& b) {
@@ -414,6 +499,43 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   }
   progress.endStage();
 
+  // ---- 3. vertex correspondence between touching tiles one zoom apart ----
+  {
+    progress.beginStage("vertex correspondence", 0);
+    // On an edge: within one quantisation step of it. Decoding moves a vertex and an edge by
+    // up to 0.87 step each, so an exact T-junction may read up to 1.7 steps off and a lattice
+    // point passing an edge within a step reads as one: the figure is exact to a step.
+    const double tolerance_px = step_m / std::max(metres_per_pixel[0], metres_per_pixel[1]);
+    // 1 mm, or the quantisation where a wide tile used a wider step than its neighbour (both
+    // are on grids of the widest step's multiples only when the steps agree).
+    const double same_position_m = std::max(1e-3, 2 * step_m);
+    std::vector<std::array<int, 2>> pairs;
+    for (std::size_t i = 0; i < tiles.size(); ++i) {
+      for (std::size_t j = 0; j < tiles.size(); ++j) {
+        if (tiles[i].uri.empty() || tiles[j].uri.empty() || tiles[j].key.zoom != tiles[i].key.zoom + 1) continue;
+        if (!touching(tiles[i].key, tiles[j].key) || isAncestor(static_cast<int>(i), static_cast<int>(j), tiles)) continue;
+        pairs.push_back({static_cast<int>(i), static_cast<int>(j)});
+      }
+    }
+    std::vector<std::size_t> missing(pairs.size(), 0);
+    tbb::parallel_for(std::size_t{0}, pairs.size(), [&](std::size_t k) {
+      const CheckTile& coarse = tiles[static_cast<std::size_t>(pairs[k][0])];
+      const CheckTile& fine = tiles[static_cast<std::size_t>(pairs[k][1])];
+      missing[k] = missingBorderVertices(coarse, fine, tolerance_px, same_position_m) +
+                   missingBorderVertices(fine, coarse, tolerance_px, same_position_m);
+    });
+    report.neighbour_pairs = pairs.size();
+    for (std::size_t k = 0; k < pairs.size(); ++k) {
+      report.missing_border_vertices += missing[k];
+      if (missing[k] > 0) {
+        problem("tiles " + keyText(tiles[static_cast<std::size_t>(pairs[k][0])].key) + " and " +
+                keyText(tiles[static_cast<std::size_t>(pairs[k][1])].key) + ": " + std::to_string(missing[k]) +
+                " outline vertices of one lie on an outline edge of the other without a vertex there");
+      }
+    }
+    progress.endStage();
+  }
+
   // ---- 2. overlap agreement between adjacent zooms ----
   progress.beginStage("overlap agreement", 0);
   const std::size_t zoom_count = report.zooms;
@@ -460,6 +582,8 @@ std::string describeCheck(const CheckReport& r) {
        << " with holes (" << r.hole_pixels << " pixels)\n";
   text << "            " << r.unbalanced_cuts << " random cuts with neighbours two or more zooms apart, "
        << r.unbalanced_cuts_with_holes << " with holes (" << r.unbalanced_hole_pixels << " pixels; reported only)\n";
+  text << "  vertices: " << r.neighbour_pairs << " pairs of touching tiles one zoom apart, "
+       << r.missing_border_vertices << " outline vertices missing where their contents meet\n";
   text << "  overlap:  " << r.overlap_pixels << " pixels covered at two adjacent zooms, " << r.overlap_disagreements
        << " differ by more than the coarser geometricError (worst " << r.worst_overlap_ratio << " of it)\n";
   text << "  errors:   " << r.dishonest_errors << " tiles whose measured error exceeds their geometricError (worst "

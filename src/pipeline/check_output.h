@@ -13,7 +13,11 @@
 //      with neighbours two or more zooms apart, reported but not a violation;
 //   2. overlap agreement: where zoom z and zoom z + 1 contents cover the same pixel, their
 //      heights differ by no more than the geometricError of every zoom-z tile covering it;
-//   3. honest errors: every tile's geometricError >= the max vertical error of its decoded
+//   3. vertex correspondence (paper 5.2.3): for every pair of touching tiles one zoom apart
+//      (not parent and child), an outline vertex of one that lies on an outline edge of the
+//      other must be a vertex of it, at the same decoded position (within 1 mm, or twice
+//      the widest quantisation step used): no T-junction where the two contents meet;
+//   4. honest errors: every tile's geometricError >= the max vertical error of its decoded
 //      content against the DEM (to the quantisation step) and >= its children's; every
 //      parent's region contains its children's.
 // Violations are counted, with the first few described.
@@ -41,6 +45,8 @@ struct CheckReport {
   std::size_t unbalanced_cuts = 0;        // random cuts with neighbours >= 2 zooms apart
   std::size_t unbalanced_cuts_with_holes = 0;
   std::size_t unbalanced_hole_pixels = 0;
+  std::size_t neighbour_pairs = 0;        // touching tiles one zoom apart (not parent and child)
+  std::size_t missing_border_vertices = 0;
   std::size_t overlap_pixels = 0;         // pixels covered at two adjacent zooms
   std::size_t overlap_disagreements = 0;
   double worst_overlap_ratio = 0;         // max |dh| / geometricError over the overlaps
@@ -51,7 +57,7 @@ struct CheckReport {
   std::vector<std::string> problems;      // the first few violations, one line each
 
   bool ok() const {
-    return cuts_with_holes == 0 && overlap_disagreements == 0 && dishonest_errors == 0 &&
+    return cuts_with_holes == 0 && overlap_disagreements == 0 && missing_border_vertices == 0 && dishonest_errors == 0 &&
            error_order_violations == 0 && region_violations == 0;
   }
 };

@@ -47,6 +47,10 @@ void validateOptions(const BuildOptions& options) {
     throw Error(ErrorCode::Usage, "--tin-max-error is " + std::to_string(options.tin_max_error_m) +
                                       "; expected a positive number of metres");
   }
+  if (options.clusters_per_tile < 1 || options.clusters_per_tile > 1024) {
+    throw Error(ErrorCode::Usage, "--clusters-per-tile is " + std::to_string(options.clusters_per_tile) +
+                                      "; expected 1 to 1024");
+  }
   if (!(options.level_ratio >= 0.01 && options.level_ratio <= 0.99)) {
     throw Error(ErrorCode::Usage, "--level-ratio is " + std::to_string(options.level_ratio) + "; expected 0.01 to 0.99");
   }
@@ -342,7 +346,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   } else {
     ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress);
     const TileFrame frame(options.scheme, dem);
-    const ZoomPlan plan = planZooms(frame, finest.mesh, options.tile_triangles, options.max_zoom);
+    const ZoomPlan plan =
+        planZooms(frame, finest.mesh, options.tile_triangles, options.max_zoom, options.clusters_per_tile);
     progress.note("zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) + " (" +
                   std::string(tileSchemeName(options.scheme)) + "), clusters assigned by " +
                   std::string(assignmentName(options.assignment)));

@@ -33,6 +33,10 @@ struct BuildOptions {
   Assignment assignment = Assignment::Merge;            // clusters only
   double tin_max_error_m = 0.5;        // clusters: the finest TIN's bound
   std::int32_t tile_triangles = 16384; // clusters: finest tiles hold about this many
+  // clusters: a level is split into this many clusters per tile of its zoom. The paper says
+  // about 4 (3.5); 16 measured: redundancy 1.33 at worst instead of 1.65, total bytes 10 %
+  // smaller, level sizes within 5 % (Interlaken, Ontario, SRTM N57E011).
+  std::int32_t clusters_per_tile = 16;
   double level_ratio = 0.5;            // clusters: edges kept per simplification
   double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)
   std::string constraints;             // clusters: break lines (OGR file), or empty

@@ -164,20 +164,28 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
   const auto inheritedTile = [&](std::size_t f) {
     return finer_cluster_tiles[static_cast<std::size_t>(inherited.cluster_of_face[f])].parent();
   };
-  // Duplicate: every tile a cluster's faces touch.
-  std::vector<std::vector<TileKey>> crossed;
-  if (assignment == Assignment::Duplicate && !by_face) {
-    const FacePartition& clusters = has_own ? own : inherited;
+  // Every tile a cluster's faces touch, per cluster of a partition.
+  const auto crossedTiles = [&](const FacePartition& clusters) {
     std::vector<std::set<std::pair<std::int32_t, std::int32_t>>> sets(static_cast<std::size_t>(clusters.cluster_count));
     for (std::size_t f = 0; f < face_count; ++f) {
       auto& set = sets[static_cast<std::size_t>(clusters.cluster_of_face[f])];
       for (std::size_t i = tile_offset[f]; i < tile_offset[f + 1]; ++i) set.insert({face_tiles[i].y, face_tiles[i].x});
     }
-    crossed.resize(sets.size());
+    std::vector<std::vector<TileKey>> crossed(sets.size());
     for (std::size_t c = 0; c < sets.size(); ++c) {
       for (const auto& [y, x] : sets[c]) crossed[c].push_back({zoom, x, y});
     }
+    return crossed;
+  };
+  std::vector<std::vector<TileKey>> own_crossed, inherited_crossed;
+  if (!by_face && assignment == Assignment::Duplicate) {
+    if (has_own) own_crossed = crossedTiles(own);
+    else inherited_crossed = crossedTiles(inherited);
   }
+  if (!by_face && assignment == Assignment::Merge && has_inherited) inherited_crossed = crossedTiles(inherited);
+  const auto append = [](std::vector<TileKey>& to, const std::vector<TileKey>& from) {
+    to.insert(to.end(), from.begin(), from.end());
+  };
 
   std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::uint32_t>> faces_of_tile;  // (y, x)
   std::vector<TileKey> targets;
@@ -190,16 +198,23 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
       case Assignment::Centroid:
         targets.push_back(has_own ? own_cluster_tiles[static_cast<std::size_t>(own.cluster_of_face[f])] : inheritedTile(f));
         break;
-      case Assignment::Duplicate: {
-        const std::int32_t cluster = has_own ? own.cluster_of_face[f] : inherited.cluster_of_face[f];
-        targets = crossed[static_cast<std::size_t>(cluster)];
+      case Assignment::Duplicate:
+        if (has_own) append(targets, own_crossed[static_cast<std::size_t>(own.cluster_of_face[f])]);
+        else append(targets, inherited_crossed[static_cast<std::size_t>(inherited.cluster_of_face[f])]);
         break;
-      }
       case Assignment::Merge:
-        if (has_own) targets.push_back(own_cluster_tiles[static_cast<std::size_t>(own.cluster_of_face[f])]);
-        if (has_inherited) targets.push_back(inheritedTile(f));
-        targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),
-                       face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f + 1]));
+        // The inherited clusters, by their finer tile's parent and by every tile they cross:
+        // they cover the square (no holes), and every outline edge is a locked border of the
+        // finer level, so the outlines of neighbouring zooms are edges of one mesh and meet
+        // vertex for vertex. The finest zoom has no inherited clusters: there every face
+        // crossing the square is added (its edges are the TIN's own).
+        if (has_inherited) {
+          targets.push_back(inheritedTile(f));
+          append(targets, inherited_crossed[static_cast<std::size_t>(inherited.cluster_of_face[f])]);
+        } else {
+          targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),
+                         face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f + 1]));
+        }
         break;
     }
     std::sort(targets.begin(), targets.end(), [](const TileKey& l, const TileKey& r) {

@@ -11,14 +11,19 @@
 //              idea; for comparison: it leaves holes where a cluster reaches into a tile
 //              whose neighbour took it).
 //   duplicate  a tile carries every own cluster that crosses it (paper 3.5.2).
-//   merge      (default; paper 3.5.3, "boundaries merge") a tile carries the own clusters
-//              whose centroid it holds AND the inherited clusters whose finer tile (at zoom
-//              + 1) is one of its children, so its content outline follows both sets of
-//              borders: the inherited ones where it meets finer tiles (the union of a tile's
-//              inherited clusters is exactly the union of its children's own clusters,
-//              border vertex for border vertex) and the own ones where it meets coarser tiles
-//              (for the same reason one zoom up). It also carries every face that crosses its
-//              square, so a drawn tile always covers its whole square: no holes in any cut.
+//   merge      (default; paper 3.5.3, "boundaries merge") a tile carries the inherited
+//              clusters that cross its square or whose finer tile is one of its children.
+//              Its mesh holds both sets of borders (the inherited ones and its own, locked
+//              for the next coarser level); its outline runs along the inherited ones, which
+//              are edges of the finer level's mesh too. So the outlines of a zoom-z tile and
+//              a zoom-(z+1) tile are both made of edges and vertices of level z+1's mesh and
+//              meet vertex for vertex (no T-junction), and the outlines of zooms z and z - 1
+//              are both edges of level z's mesh. The crossing clusters cover the square, so a
+//              drawn tile never leaves a hole in any cut. The finest zoom has no inherited
+//              clusters: there every face crossing the square is added (TIN edges). Taking
+//              the own clusters by centroid as well (the paper's literal reading) adds
+//              outline edges that exist in this level only, where a finer tile's outline
+//              vertex can sit within millimetres of an edge (measured: one on Ontario).
 // A cluster's centroid is the area-weighted centroid of its faces in scheme coordinates.
 
 #include <array>

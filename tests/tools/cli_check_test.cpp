@@ -1,6 +1,7 @@
 // `terratiles check` on real builds: the default (boundaries merge) leaves no hole in any cut
-// whose neighbours are at most one zoom apart, contents agree where they overlap, every
-// geometricError is honest; duplicate passes too; centroid fails (the checker is not blind).
+// whose neighbours are at most one zoom apart, no T-junction where tiles of two zooms meet,
+// contents agree where they overlap, every geometricError is honest; duplicate passes too;
+// centroid (holes) and the grid pyramid (T-junctions) fail: the checker is not blind.
 #include <doctest/doctest.h>
 
 #include <filesystem>
@@ -33,6 +34,8 @@ void checkSeamless(const CheckReport& report) {
   CHECK(report.zooms >= 2);
   CHECK(report.cuts >= 300);
   CHECK(report.cuts_with_holes == 0);
+  CHECK(report.neighbour_pairs > 0);
+  CHECK(report.missing_border_vertices == 0);
   CHECK(report.overlap_pixels > 0);
   CHECK(report.overlap_disagreements == 0);
   CHECK(report.dishonest_errors == 0);
@@ -49,13 +52,13 @@ TEST_SUITE("check") {
     checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {}, dir, "interlaken_webmercator"));
     checkSeamless(buildAndCheck("srtm3_N57E011_4326.tif", {"--scheme", "geographic", "--tin-max-error", "5"}, dir,
                                 "srtm_geographic"));
-    checkSeamless(buildAndCheck("ca_on_lidar_dtm_1m_26917.tif", {"--scheme", "local", "--tile-triangles", "4096"}, dir,
+    checkSeamless(buildAndCheck("ca_on_lidar_dtm_1m_26917.tif", {"--scheme", "local", "--tin-max-error", "0.1", "--tile-triangles", "4096"}, dir,
                                 "ontario_local"));
     checkSeamless(buildAndCheck("us_mn_lidar_dtm_1m_26915.tif", {"--tin-max-error", "0.1", "--tile-triangles", "4096"},
                                 dir, "minnesota_webmercator"));
   }
 
-  TEST_CASE("duplicate passes the check and centroid leaves holes") {
+  TEST_CASE("duplicate passes the check, centroid leaves holes, the grid pyramid has T-junctions") {
     test::TempDir dir;
     checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--assign", "duplicate"}, dir, "duplicate"));
     const CheckReport centroid = buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--assign", "centroid"}, dir, "centroid");
@@ -65,6 +68,11 @@ TEST_SUITE("check") {
     const auto cli = test::runTerratiles({"check", dir / "centroid", "--cuts", "50"});
     CHECK(cli.exit_code == 5);
     CHECK(cli.out.find("terratiles check: FAILED") != std::string::npos);
+    // The grid pyramid's T-junctions between zooms are missing border vertices.
+    const CheckReport grid = buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--lod", "grid"}, dir, "grid");
+    CHECK(grid.neighbour_pairs > 0);
+    CHECK(grid.missing_border_vertices > 0);
+    CHECK_FALSE(grid.ok());
     const auto not_an_output = test::runTerratiles({"check", dir.path().string()});
     CHECK(not_an_output.exit_code == 3);
     CHECK(not_an_output.err.find("tileset.json cannot be read") != std::string::npos);

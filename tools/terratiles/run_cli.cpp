@@ -369,6 +369,11 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "The finest zoom is the first whose tiles hold at most about N triangles of the finest TIN")
       ->capture_default_str();
   build_command
+      ->add_option("--clusters-per-tile", build.clusters_per_tile,
+                   "Clusters a level is split into per tile of its zoom (paper: about 4); more make thinner "
+                   "overlaps between tiles but lock more edges")
+      ->capture_default_str();
+  build_command
       ->add_option("--level-ratio", build.level_ratio, "Edges a simplification keeps in every cluster (paper: 0.5)")
       ->capture_default_str();
   build_command
