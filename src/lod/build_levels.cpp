@@ -127,6 +127,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     partition_options.seed = options.seed + static_cast<std::uint32_t>(l);
     if (options.repartition || l == 0) {
       level.partition = partitionFaces(graph, partition_options);
+      if (options.regroup_clusters) level.partition = options.regroup_clusters(level.mesh, l, level.partition);
     } else {
       level.partition = std::move(inherited);
     }

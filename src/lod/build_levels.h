@@ -16,6 +16,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "src/base/progress.h"
@@ -45,6 +46,11 @@ struct LevelOptions {
   // border, constraints) dominate it; or after the level simplified as one cluster.
   std::int32_t coarser_levels = 0;
   std::uint32_t seed = 1;
+  // When set, regroups each level's partition before it is simplified (clusters with the same
+  // id are simplified as one, so the borders between them are not locked): the tiling
+  // stage joins clusters whose borders no tile outline will follow (paper fig 34).
+  // Arguments: the level's mesh, its index, the METIS partition.
+  std::function<FacePartition(const TinMesh&, std::size_t, const FacePartition&)> regroup_clusters;
   // false: fixed borders, the scheme the paper compares against (fig 42): the finest level's
   // partition is kept at every level (each simplified triangle stays in its cluster).
   bool repartition = true;

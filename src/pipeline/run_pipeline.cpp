@@ -358,6 +358,13 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       level_options.level_error_growth = options.level_error_growth;
       level_options.first_budget_m = options.tin_max_error_m * options.level_error_growth;
     }
+    if (options.assignment == Assignment::Merge && options.join_tile_clusters) {
+      // Level l's clusters are inherited at zoom max_zoom - l - 1: join those that merge puts
+      // in the same tiles, so only borders that some tile outline follows stay locked.
+      level_options.regroup_clusters = [&](const TinMesh& mesh, std::size_t l, const FacePartition& partition) {
+        return groupClustersByTiles(frame, mesh, partition, plan.max_zoom - static_cast<std::int32_t>(l) - 1);
+      };
+    }
     if (plan.max_zoom > plan.min_zoom) {
       level_options.coarser_levels = plan.max_zoom - plan.min_zoom;
       levels = buildLevels(dem, std::move(finest.mesh), level_options, std::move(finest.constrained_edges), progress);

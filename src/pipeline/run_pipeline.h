@@ -37,6 +37,9 @@ struct BuildOptions {
   // about 4 (3.5); 16 measured: redundancy 1.33 at worst instead of 1.65, total bytes 10 %
   // smaller, level sizes within 5 % (Interlaken, Ontario, SRTM N57E011).
   std::int32_t clusters_per_tile = 16;
+  // clusters, merge: simplify the clusters that cross the same tiles as one, so only borders
+  // a tile outline follows stay locked (paper fig 34).
+  bool join_tile_clusters = true;
   double level_ratio = 0.5;            // clusters: edges kept per simplification
   double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)
   std::string constraints;             // clusters: break lines (OGR file), or empty

@@ -87,7 +87,58 @@ TileBounds boundsOf(const std::vector<std::array<double, 2>>& points) {
   return box;
 }
 
+// The tiles each face's bounding box (in scheme coordinates) shares area with, as CSR.
+struct FaceTiles {
+  std::vector<std::size_t> offset;
+  std::vector<TileKey> tiles;
+};
+
+FaceTiles faceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vector<std::array<double, 2>>& scheme,
+                    std::int32_t zoom) {
+  const std::size_t face_count = mesh.triangleCount();
+  const auto& idx = mesh.triangle_indices;
+  FaceTiles out;
+  out.offset.assign(face_count + 1, 0);
+  out.tiles.reserve(face_count + face_count / 4);
+  for (std::size_t f = 0; f < face_count; ++f) {
+    TileBounds box{1e300, 1e300, -1e300, -1e300};
+    for (std::size_t k = 0; k < 3; ++k) {
+      const auto& p = scheme[idx[3 * f + k]];
+      box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+    }
+    for (const TileKey& key : frame.tilesIntersecting(box, zoom)) out.tiles.push_back(key);
+    out.offset[f + 1] = out.tiles.size();
+  }
+  return out;
+}
+
 }  // namespace
+
+FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, const FacePartition& partition,
+                                   std::int32_t zoom) {
+  const FaceTiles face_tiles = faceTiles(frame, mesh, frame.toScheme(mesh.vertices), zoom);
+  std::vector<std::set<std::pair<std::int32_t, std::int32_t>>> sets(static_cast<std::size_t>(partition.cluster_count));
+  for (std::size_t f = 0; f < mesh.triangleCount(); ++f) {
+    auto& set = sets[static_cast<std::size_t>(partition.cluster_of_face[f])];
+    for (std::size_t i = face_tiles.offset[f]; i < face_tiles.offset[f + 1]; ++i) {
+      set.insert({face_tiles.tiles[i].y, face_tiles.tiles[i].x});
+    }
+  }
+  std::map<std::set<std::pair<std::int32_t, std::int32_t>>, std::int32_t> group_of_set;
+  std::vector<std::int32_t> group_of_cluster(sets.size(), -1);
+  FacePartition grouped;
+  grouped.cluster_of_face.resize(partition.cluster_of_face.size());
+  for (std::size_t f = 0; f < grouped.cluster_of_face.size(); ++f) {
+    const auto cluster = static_cast<std::size_t>(partition.cluster_of_face[f]);
+    if (group_of_cluster[cluster] < 0) {
+      const auto [it, inserted] = group_of_set.try_emplace(sets[cluster], static_cast<std::int32_t>(group_of_set.size()));
+      group_of_cluster[cluster] = it->second;
+    }
+    grouped.cluster_of_face[f] = group_of_cluster[cluster];
+  }
+  grouped.cluster_count = static_cast<std::int32_t>(group_of_set.size());
+  return grouped;
+}
 
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
                    std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
@@ -123,19 +174,9 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
   const auto& idx = mesh.triangle_indices;
   const auto corner = [&](std::size_t f, int k) { return scheme[idx[3 * f + static_cast<std::size_t>(k)]]; };
 
-  // The tiles each face's bounding box shares area with (CSR).
-  std::vector<std::size_t> tile_offset(face_count + 1, 0);
-  std::vector<TileKey> face_tiles;
-  face_tiles.reserve(face_count + face_count / 4);
-  for (std::size_t f = 0; f < face_count; ++f) {
-    TileBounds box{1e300, 1e300, -1e300, -1e300};
-    for (int k = 0; k < 3; ++k) {
-      const auto p = corner(f, k);
-      box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
-    }
-    for (const TileKey& key : frame.tilesIntersecting(box, zoom)) face_tiles.push_back(key);
-    tile_offset[f + 1] = face_tiles.size();
-  }
+  const FaceTiles face_tiles_csr = faceTiles(frame, mesh, scheme, zoom);
+  const std::vector<std::size_t>& tile_offset = face_tiles_csr.offset;
+  const std::vector<TileKey>& face_tiles = face_tiles_csr.tiles;
 
   // Own clusters: the tile of each one's centroid.
   const FacePartition& own = level.partition;
@@ -203,13 +244,12 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
         else append(targets, inherited_crossed[static_cast<std::size_t>(inherited.cluster_of_face[f])]);
         break;
       case Assignment::Merge:
-        // The inherited clusters, by their finer tile's parent and by every tile they cross:
+        // The inherited clusters, in every tile they cross:
         // they cover the square (no holes), and every outline edge is a locked border of the
         // finer level, so the outlines of neighbouring zooms are edges of one mesh and meet
         // vertex for vertex. The finest zoom has no inherited clusters: there every face
         // crossing the square is added (its edges are the TIN's own).
         if (has_inherited) {
-          targets.push_back(inheritedTile(f));
           append(targets, inherited_crossed[static_cast<std::size_t>(inherited.cluster_of_face[f])]);
         } else {
           targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),

@@ -12,7 +12,7 @@
 //              whose neighbour took it).
 //   duplicate  a tile carries every own cluster that crosses it (paper 3.5.2).
 //   merge      (default; paper 3.5.3, "boundaries merge") a tile carries the inherited
-//              clusters that cross its square or whose finer tile is one of its children.
+//              clusters that cross its square.
 //              Its mesh holds both sets of borders (the inherited ones and its own, locked
 //              for the next coarser level); its outline runs along the inherited ones, which
 //              are edges of the finer level's mesh too. So the outlines of a zoom-z tile and
@@ -89,6 +89,14 @@ struct TileFaces {
   TileKey key;
   std::vector<std::uint32_t> triangle_indices;  // into the level's mesh vertices
 };
+
+// Joins the clusters of `partition` (of `mesh`, a level shown at zoom + 1) that cross
+// exactly the same tiles of `zoom`, where they will be inherited clusters: merge puts them in
+// the same tiles, so the borders between them are on no tile outline and need no lock (paper
+// fig 34: a tile's inner cluster borders are unlocked). The result numbers the groups 0..k-1
+// in order of first appearance.
+FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, const FacePartition& partition,
+                                   std::int32_t zoom);
 
 // The tiles of one zoom, sorted by (y, x). own_cluster_tiles: per cluster of level.partition
 // (this zoom's own clusters), the tile holding its centroid, filled here for the next coarser

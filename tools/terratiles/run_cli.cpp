@@ -368,6 +368,9 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->add_option("--tile-triangles", build.tile_triangles,
                    "The finest zoom is the first whose tiles hold at most about N triangles of the finest TIN")
       ->capture_default_str();
+  build_command->add_flag("--no-join-tile-clusters", [&build](std::int64_t) { build.join_tile_clusters = false; },
+                          "merge: keep every METIS cluster border locked, instead of simplifying the clusters that "
+                          "cross the same tiles as one (paper fig 34)");
   build_command
       ->add_option("--clusters-per-tile", build.clusters_per_tile,
                    "Clusters a level is split into per tile of its zoom (paper: about 4); more make thinner "
