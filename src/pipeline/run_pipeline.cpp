@@ -180,7 +180,15 @@ TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes) {
   while (nodes.size() > 1) {
     int zoom = 0;
     for (const auto& [key, node] : nodes) zoom = std::max(zoom, std::get<0>(key));
-    TERRATILES_ASSERT(zoom > 0);  // one pyramid: zoom 0 has a single tile per scheme half
+    if (zoom == 0) {
+      // The geographic scheme's two zoom-0 tiles (data on both sides of the prime meridian):
+      // a content-less root above them (zoom -1 marks it; it has no file).
+      TileNode root;
+      root.key = {-1, 0, 0};
+      for (auto& [key, node] : nodes) root.children.push_back(std::move(node));
+      nodes.clear();
+      return root;
+    }
     std::vector<std::tuple<int, int, int>> at_zoom;
     for (const auto& [key, node] : nodes) {
       if (std::get<0>(key) == zoom) at_zoom.push_back(key);

@@ -55,7 +55,12 @@ std::vector<std::array<double, 2>> TileFrame::toScheme(std::span<const GridPoint
     geodetic[i].height_m = points[i].height_m;
   }
   to_wgs84_->transform(crs, geodetic);
-  for (std::size_t i = 0; i < points.size(); ++i) out[i] = {geodetic[i].lon_deg, geodetic[i].lat_deg};
+  // Web Mercator ends at +-85.0511 deg: data beyond (a global DEM's polar caps) goes to the
+  // tiles of the first and last rows, as web maps draw it.
+  const double limit = kind_ == TileSchemeKind::WebMercator ? kWebMercatorMaxLatitudeDeg : 90.0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    out[i] = {geodetic[i].lon_deg, std::clamp(geodetic[i].lat_deg, -limit, limit)};
+  }
   return out;
 }
 
@@ -147,18 +152,21 @@ ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t t
   }
   const TileBounds box = boundsOf(frame.toScheme(finest.vertices));
   const auto tilesAt = [&](std::int32_t zoom) { return frame.tilesIntersecting(box, zoom).size(); };
+  // The finest zoom at which the data fits in at most two tiles: the coarsest zoom worth
+  // showing, and the finest one for data that one tile holds.
+  std::int32_t fit_zoom = 0;
+  while (fit_zoom < 24 && tilesAt(fit_zoom + 1) <= 2) ++fit_zoom;
   ZoomPlan plan;
   if (forced_max_zoom >= 0) {
     plan.max_zoom = forced_max_zoom;
   } else {
-    plan.max_zoom = 0;
+    plan.max_zoom = fit_zoom;
     while (plan.max_zoom < 24 &&
            static_cast<double>(finest.triangleCount()) / static_cast<double>(tilesAt(plan.max_zoom)) > tile_triangles) {
       ++plan.max_zoom;
     }
   }
-  plan.min_zoom = plan.max_zoom;
-  while (plan.min_zoom > 0 && tilesAt(plan.min_zoom) > 2) --plan.min_zoom;
+  plan.min_zoom = std::min(fit_zoom, plan.max_zoom);
   for (std::int32_t zoom = plan.max_zoom; zoom > plan.min_zoom; --zoom) {
     plan.clusters_per_level.push_back(clusters_per_tile * static_cast<std::int32_t>(tilesAt(zoom)));
   }

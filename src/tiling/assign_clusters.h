@@ -79,9 +79,9 @@ struct ZoomPlan {
   std::vector<std::int32_t> clusters_per_level;
 };
 
-// max_zoom: the first zoom whose tiles over the data hold at most `tile_triangles` of the
-// finest TIN's triangles each (or `forced_max_zoom` when >= 0); min_zoom: the finest zoom at
-// which the data spans at most two tiles (never above max_zoom).
+// min_zoom: the finest zoom at which the data spans at most two tiles (never above
+// max_zoom); max_zoom: the first zoom from there whose tiles over the data hold at most
+// `tile_triangles` of the finest TIN's triangles each (or `forced_max_zoom` when >= 0).
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
                    std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4);
 
