@@ -96,6 +96,7 @@ struct CheckTile {
   std::vector<std::array<double, 3>> vertex_ecef;
   std::vector<std::array<std::uint32_t, 2>> boundary_edges;
   std::vector<std::uint32_t> boundary_vertices;
+  double polar_cap_deg = 90;  // triangles at a pole reach down to this |latitude| (left out)
 };
 
 json readJson(const fs::path& path) {
@@ -183,8 +184,18 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   if (n > 0 && !to_dem->Transform(n, xs.data(), ys.data(), heights.data(), ok.data())) {
     throw Error(ErrorCode::Input, tile.uri + ": vertices cannot be transformed back to " + dem.crs_name);
   }
+  // A geographic DEM: longitudes back into the DEM's 360 degrees (lon 180 and -180 are one
+  // meridian), and vertices at a pole, whose longitude no decoding can give back, marked.
+  const bool geographic = dem_crs.IsGeographic();
+  std::vector<std::uint8_t> at_pole(n, 0);
   std::vector<GridPoint> grid(n);
   for (std::size_t v = 0; v < n; ++v) {
+    if (geographic) {
+      while (xs[v] < dem.origin_x) xs[v] += 360;
+      while (xs[v] >= dem.origin_x + 360) xs[v] -= 360;
+      // Quantisation moves a pole vertex off the pole by up to a step or so.
+      at_pole[v] = std::fabs(ys[v]) > 90 - std::max(1e-6, 4 * step_m / 111000.0);
+    }
     grid[v] = {(xs[v] - dem.origin_x) / dem.pixel_size_x - 0.5, (dem.origin_y - ys[v]) / dem.pixel_size_y - 0.5, zs[v]};
   }
   struct Sample {
@@ -199,6 +210,13 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   // pixel by at most that times (1 + its slope).
   const double tolerance_px = 2 * step_m / std::min(metres_per_pixel[0], metres_per_pixel[1]) + 1e-6;
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    if (at_pole[idx[t]] || at_pole[idx[t + 1]] || at_pole[idx[t + 2]]) {
+      // Its place on the grid is unknown: leave it out, and the cap it reaches out of the check.
+      for (std::size_t k = 0; k < 3; ++k) {
+        if (!at_pole[idx[t + k]]) tile.polar_cap_deg = std::min(tile.polar_cap_deg, std::fabs(ys[idx[t + k]]));
+      }
+      continue;
+    }
     const GridPoint &a = grid[idx[t]], &b = grid[idx[t + 1]], &c = grid[idx[t + 2]];
     const double ux = (b.col - a.col) * metres_per_pixel[0], uy = (b.row - a.row) * metres_per_pixel[1];
     const double vx = (c.col - a.col) * metres_per_pixel[0], vy = (c.row - a.row) * metres_per_pixel[1];
@@ -425,6 +443,17 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     if (tile.uri.empty() || tile.key.zoom != max_zoom) continue;
     for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
   }
+  // Triangles at a pole were left out (their grid position is unknown): so is the cap they
+  // reach.
+  double polar_cap_deg = 90;
+  for (const CheckTile& tile : tiles) polar_cap_deg = std::min(polar_cap_deg, tile.polar_cap_deg);
+  if (polar_cap_deg < 90) {
+    report.polar_cap_deg = polar_cap_deg;
+    for (std::int32_t row = 0; row < dem.height; ++row) {
+      if (std::fabs(dem.pixelCentre(0, row).y) < polar_cap_deg) continue;
+      for (std::int32_t col = 0; col < dem.width; ++col) footprint[dem.index(col, row)] = 0;
+    }
+  }
   for (const std::uint8_t f : footprint) report.footprint_pixels += f;
   std::vector<std::uint32_t> stamp(dem.pixelCount(), 0);
   std::uint32_t cut_id = 0;
@@ -577,7 +606,9 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
 std::string describeCheck(const CheckReport& r) {
   std::ostringstream text;
   text << "terratiles check: " << (r.ok() ? "ok" : "FAILED") << "\n";
-  text << "  " << r.tiles << " tiles over " << r.zooms << " zooms; footprint " << r.footprint_pixels << " pixels\n";
+  text << "  " << r.tiles << " tiles over " << r.zooms << " zooms; footprint " << r.footprint_pixels << " pixels";
+  if (r.polar_cap_deg < 90) text << " (poleward of +-" << r.polar_cap_deg << " deg left out: triangles at a pole)";
+  text << "\n";
   text << "  coverage: " << r.cuts << " cuts with neighbours at most one zoom apart, " << r.cuts_with_holes
        << " with holes (" << r.hole_pixels << " pixels)\n";
   text << "            " << r.unbalanced_cuts << " random cuts with neighbours two or more zooms apart, "
