@@ -159,12 +159,16 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   const auto& earth = GeographicLib::Geocentric::WGS84();
   const std::size_t n = mesh.vertexCount();
   std::vector<double> xs(n), ys(n), zs(n);
+  std::vector<std::array<double, 3>> ecef(n), up(n);
   for (std::size_t v = 0; v < n; ++v) {
     const double gx = mesh.translation[0] + mesh.positions[3 * v];
     const double gy = mesh.translation[1] + mesh.positions[3 * v + 1];
     const double gz = mesh.translation[2] + mesh.positions[3 * v + 2];
     double lat = 0, lon = 0, h = 0;
     earth.Reverse(gx, -gz, gy, lat, lon, h);  // glTF y-up back to ECEF z-up
+    ecef[v] = {gx, -gz, gy};
+    const double lat_rad = lat / kRadToDeg, lon_rad = lon / kRadToDeg;
+    up[v] = {std::cos(lat_rad) * std::cos(lon_rad), std::cos(lat_rad) * std::sin(lon_rad), std::sin(lat_rad)};
     if (geoid) {
       const std::optional<double> undulation = geoid->undulationAt(lon, lat);
       if (!undulation) throw Error(ErrorCode::Input, tile.uri + ": a vertex lies outside the geoid grid");
@@ -208,7 +212,9 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   const auto& idx = mesh.triangle_indices;
   // Quantisation moves a vertex by at most sqrt(3)/2 step in 3D: a plane's height at a fixed
   // pixel by at most that times (1 + its slope).
-  const double tolerance_px = 2 * step_m / std::min(metres_per_pixel[0], metres_per_pixel[1]) + 1e-6;
+  // A geographic DEM's columns narrow with the cosine of the latitude (groundMetresPerPixel
+  // is at the centre latitude).
+  const double centre_cos = geographic ? std::cos(dem.pixelCentre(0, (dem.height - 1) / 2.0).y / kRadToDeg) : 1.0;
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
     if (at_pole[idx[t]] || at_pole[idx[t + 1]] || at_pole[idx[t + 2]]) {
       // Its place on the grid is unknown: leave it out, and the cap it reaches out of the check.
@@ -218,11 +224,23 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
       continue;
     }
     const GridPoint &a = grid[idx[t]], &b = grid[idx[t + 1]], &c = grid[idx[t + 2]];
-    const double ux = (b.col - a.col) * metres_per_pixel[0], uy = (b.row - a.row) * metres_per_pixel[1];
-    const double vx = (c.col - a.col) * metres_per_pixel[0], vy = (c.row - a.row) * metres_per_pixel[1];
-    const double det = ux * vy - uy * vx;
-    const double dz1 = b.height_m - a.height_m, dz2 = c.height_m - a.height_m;
-    const double slope = det != 0 ? std::hypot((dz1 * vy - dz2 * uy) / det, (dz2 * ux - dz1 * vx) / det) : 0;
+    // The decoded triangle's slope, from its normal and the local vertical (right at any
+    // latitude, where metres per grid column vary).
+    const auto& pa = ecef[idx[t]];
+    const auto& pb = ecef[idx[t + 1]];
+    const auto& pc = ecef[idx[t + 2]];
+    const std::array<double, 3> u{pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+    const std::array<double, 3> w{pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
+    const std::array<double, 3> normal{u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+    const auto& vertical = up[idx[t]];
+    const double along = std::fabs(normal[0] * vertical[0] + normal[1] * vertical[1] + normal[2] * vertical[2]);
+    const double length = std::hypot(normal[0], normal[1], normal[2]);
+    const double across = std::sqrt(std::max(0.0, length * length - along * along));
+    const double slope = along > 0 ? across / along : 1e6;
+    const double column_m =
+        geographic ? metres_per_pixel[0] * std::sqrt(std::max(1e-12, 1 - vertical[2] * vertical[2])) / centre_cos
+                   : metres_per_pixel[0];
+    const double tolerance_px = 2 * step_m / std::min(column_m, metres_per_pixel[1]) + 1e-6;
     const auto slack = static_cast<float>(0.87 * step_m * (1 + slope));
     forEachPixelNear(dem, a, b, c, tolerance_px, [&](std::size_t pixel, double h, bool inside) {
       const float dem_h = dem.heights_m[pixel];
