@@ -206,6 +206,7 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
     std::uint32_t pixel;
     float height;  // NaN: only near the content (covered, but not measured)
     float slack;
+    float error;   // |content - DEM| by this triangle (its nearest edge point when only near)
   };
   std::vector<Sample> covered;
   double max_error = 0, max_excess = -1e300;
@@ -245,14 +246,9 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
     forEachPixelNear(dem, a, b, c, tolerance_px, [&](std::size_t pixel, double h, bool inside) {
       const float dem_h = dem.heights_m[pixel];
       if (std::isnan(dem_h)) return;
-      if (!inside) {
-        covered.push_back({static_cast<std::uint32_t>(pixel), std::nanf(""), slack});
-        return;
-      }
-      const double error = std::fabs(h - dem_h);
-      max_error = std::max(max_error, error);
-      max_excess = std::max(max_excess, error - slack);
-      covered.push_back({static_cast<std::uint32_t>(pixel), static_cast<float>(h), slack});
+      const auto error = static_cast<float>(std::fabs(h - dem_h));
+      covered.push_back({static_cast<std::uint32_t>(pixel), inside ? static_cast<float>(h) : std::nanf(""), slack,
+                         error});
     });
   }
   // By pixel, measured samples first.
@@ -262,11 +258,26 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   tile.pixels.clear();
   tile.heights.clear();
   tile.slack.clear();
-  for (const Sample& sample : covered) {
-    if (!tile.pixels.empty() && tile.pixels.back() == sample.pixel) continue;
-    tile.pixels.push_back(sample.pixel);
-    tile.heights.push_back(sample.height);
-    tile.slack.push_back(sample.slack);
+  // A pixel's error: the smallest among the triangles it is in or within the tolerance of.
+  // Decoding moves vertices by up to a step, so a pixel within a step of an edge may belong
+  // to either side: next to a steep face, the wrong side's plane is far from the DEM.
+  for (std::size_t i = 0; i < covered.size();) {
+    std::size_t j = i;
+    float error = covered[i].error, slack = covered[i].slack;
+    bool measured = false;
+    for (; j < covered.size() && covered[j].pixel == covered[i].pixel; ++j) {
+      error = std::min(error, covered[j].error);
+      slack = std::max(slack, covered[j].slack);
+      measured |= !std::isnan(covered[j].height);
+    }
+    if (measured) {
+      max_error = std::max(max_error, static_cast<double>(error));
+      max_excess = std::max(max_excess, static_cast<double>(error) - slack);
+    }
+    tile.pixels.push_back(covered[i].pixel);
+    tile.heights.push_back(covered[i].height);
+    tile.slack.push_back(slack);
+    i = j;
   }
   tile.measured_error_m = max_error;
   tile.excess_error_m = std::max(0.0, max_excess);

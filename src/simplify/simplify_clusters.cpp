@@ -14,6 +14,7 @@
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
 
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -341,7 +342,24 @@ class TerrainQuadrics {
   ClusterState* state_;
 };
 
-// Refuses fold-overs and collapses above the error budget (see the header).
+// A face steeper than this (rise over run, about 89.4 degrees) is a wall no terrain level
+// needs: simplification only makes one when it pulls a vertex next to a much higher or lower
+// one (a sliver), and such a face turns a quantisation step of the vertices into a height
+// jump as large as the wall.
+constexpr double kMaxSlope = 100;
+
+double slopeOf(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
+               double metres_per_row) {
+  const double ux = (b.col - a.col) * metres_per_col, uy = (b.row - a.row) * metres_per_row;
+  const double vx = (c.col - a.col) * metres_per_col, vy = (c.row - a.row) * metres_per_row;
+  const double det = ux * vy - uy * vx;
+  if (det == 0) return std::numeric_limits<double>::infinity();
+  const double dz1 = b.height_m - a.height_m, dz2 = c.height_m - a.height_m;
+  return std::hypot((dz1 * vy - dz2 * uy) / det, (dz2 * ux - dz1 * vx) / det);
+}
+
+// Refuses fold-overs, near-vertical faces and collapses above the error budget (see the
+// header).
 class TerrainFilter {
  public:
   explicit TerrainFilter(ClusterState* state) : state_(state) {}
@@ -351,6 +369,14 @@ class TerrainFilter {
     if (!placement) return placement;
     const GridPoint placed = placedGrid(*state_, profile, *placement);
     if (!keepsHeightField(*state_, profile, placed)) {
+      ++state_->refused_for_flip;
+      return {};
+    }
+    const bool walls = !allNewTriangles(profile, [&](VertexIndex a, VertexIndex c) {
+      return slopeOf(state_->grid[a], placed, state_->grid[c], state_->options->metres_per_col,
+                     state_->options->metres_per_row) <= kMaxSlope;
+    });
+    if (walls) {
       ++state_->refused_for_flip;
       return {};
     }
