@@ -369,9 +369,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     if (options.assignment == Assignment::Merge && options.join_tile_clusters) {
       // Level l's clusters are inherited at zoom max_zoom - l - 1: join those that merge puts
       // in the same tiles, so only borders that some tile outline follows stay locked.
-      level_options.regroup_clusters = [&](const TinMesh& mesh, std::size_t l, const FacePartition& partition) {
-        return groupClustersByTiles(frame, mesh, partition, plan.max_zoom - static_cast<std::int32_t>(l) - 1);
-      };
+      level_options.regroup_clusters = joinTileClusters(frame, plan.max_zoom);
     }
     if (plan.max_zoom > plan.min_zoom) {
       level_options.coarser_levels = plan.max_zoom - plan.min_zoom;

@@ -145,6 +145,13 @@ FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, 
   return grouped;
 }
 
+std::function<FacePartition(const TinMesh&, std::size_t, const FacePartition&)> joinTileClusters(
+    const TileFrame& frame, std::int32_t max_zoom) {
+  return [&frame, max_zoom](const TinMesh& mesh, std::size_t level, const FacePartition& partition) {
+    return groupClustersByTiles(frame, mesh, partition, max_zoom - static_cast<std::int32_t>(level) - 1);
+  };
+}
+
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
                    std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
   if (tile_triangles < 64) {

@@ -28,6 +28,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string_view>
@@ -97,6 +98,12 @@ struct TileFaces {
 // in order of first appearance.
 FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, const FacePartition& partition,
                                    std::int32_t zoom);
+
+// LevelOptions::regroup_clusters for levels shown from max_zoom down (level l at zoom
+// max_zoom - l): level l's clusters are inherited at zoom max_zoom - l - 1, so they are
+// grouped by the tiles of that zoom. `frame` must outlive the levels' build.
+std::function<FacePartition(const TinMesh&, std::size_t, const FacePartition&)> joinTileClusters(
+    const TileFrame& frame, std::int32_t max_zoom);
 
 // The tiles of one zoom, sorted by (y, x). own_cluster_tiles: per cluster of level.partition
 // (this zoom's own clusters), the tile holding its centroid, filled here for the next coarser

@@ -41,6 +41,34 @@ inline double parseNumber(const std::string& text, const std::string& option) {
   return value;
 }
 
+// RASTER[:TIN_MAX_ERROR], a raster argument of the experiment programs (error in metres,
+// > 0; default 0.5), and the row label of their tables ("file.tif @0.5m").
+struct RasterSpec {
+  std::string path;
+  double tin_max_error_m = 0.5;
+};
+
+inline RasterSpec parseRasterSpec(const std::string& arg) {
+  RasterSpec raster;
+  const std::size_t colon = arg.rfind(':');
+  raster.path = arg.substr(0, colon);
+  if (colon != std::string::npos) {
+    raster.tin_max_error_m = parseNumber(arg.substr(colon + 1), "TIN_MAX_ERROR of " + raster.path);
+    if (!(raster.tin_max_error_m > 0)) {
+      throw Error(ErrorCode::Usage, "TIN_MAX_ERROR of " + raster.path + " expects a number > 0, found '" +
+                                        arg.substr(colon + 1) + "'");
+    }
+  }
+  return raster;
+}
+
+inline std::string rasterLabel(const RasterSpec& raster) {
+  const std::size_t slash = raster.path.find_last_of('/');
+  char error[32];
+  std::snprintf(error, sizeof error, " @%gm", raster.tin_max_error_m);
+  return (slash == std::string::npos ? raster.path : raster.path.substr(slash + 1)) + error;
+}
+
 // Runs `body` (returning the exit code) as a program's main: an Error becomes
 // "NAME: error: ..." and its exit code, any other exception exit code 1.
 template <typename Body>

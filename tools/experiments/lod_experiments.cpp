@@ -37,13 +37,8 @@
 namespace terratiles {
 namespace {
 
-struct Raster {
-  std::string path;
-  double tin_max_error_m = 0.5;
-};
-
 struct ExperimentOptions {
-  std::vector<Raster> rasters;
+  std::vector<bench::RasterSpec> rasters;
   int runs = 5;
   std::string experiment = "all";
   int rounds_clusters = 8;  // clusters per round of experiment 2 (the paper used 64 on one TIN)
@@ -85,19 +80,10 @@ ExperimentOptions parseOptions(int argc, char** argv) {
       continue;
     }
     if (!arg.empty() && arg[0] == '-') throw Error(ErrorCode::Usage, "unknown option " + arg + "; " + usage);
-    Raster raster;
-    const std::size_t colon = arg.rfind(':');
-    raster.path = arg.substr(0, colon);
-    if (colon != std::string::npos) raster.tin_max_error_m = parsePositive(arg.substr(colon + 1), "TIN_MAX_ERROR of " + raster.path);
-    options.rasters.push_back(raster);
+    options.rasters.push_back(bench::parseRasterSpec(arg));
   }
   if (options.rasters.empty()) throw Error(ErrorCode::Usage, "no raster given; " + usage);
   return options;
-}
-
-std::string fileName(const std::string& path) {
-  const std::size_t slash = path.find_last_of('/');
-  return slash == std::string::npos ? path : path.substr(slash + 1);
 }
 
 SimplifyOptions halfEdges(const DemGrid& dem) {
@@ -220,15 +206,13 @@ int runExperiments(int argc, char** argv) {
     TinMesh tin;
   };
   std::vector<Input> inputs;
-  for (const Raster& raster : options.rasters) {
+  for (const bench::RasterSpec& raster : options.rasters) {
     std::fprintf(stderr, "%s: reading and building the TIN (max error %g m)\n", raster.path.c_str(), raster.tin_max_error_m);
     Input input;
     input.dem = readDem({raster.path});
     Progress quiet(ProgressMode::Quiet);
     input.tin = buildTin(input.dem, TinOptions{raster.tin_max_error_m}, quiet);
-    char label[128];
-    std::snprintf(label, sizeof label, "%s @%gm", fileName(raster.path).c_str(), raster.tin_max_error_m);
-    input.name = label;
+    input.name = bench::rasterLabel(raster);
     inputs.push_back(std::move(input));
   }
   const bool all = options.experiment == "all";

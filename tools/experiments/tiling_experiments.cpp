@@ -30,16 +30,6 @@
 namespace terratiles {
 namespace {
 
-struct Raster {
-  std::string path;
-  double tin_max_error_m = 0.5;
-};
-
-std::string fileName(const std::string& path) {
-  const std::size_t slash = path.find_last_of('/');
-  return slash == std::string::npos ? path : path.substr(slash + 1);
-}
-
 // Redundancy of each zoom (finest first) and of all zooms together.
 struct Redundancy {
   std::vector<double> per_zoom;
@@ -68,7 +58,7 @@ Redundancy redundancyOf(const TileFrame& frame, const std::vector<Level>& levels
 }
 
 int runExperiments(int argc, char** argv) {
-  std::vector<Raster> rasters;
+  std::vector<bench::RasterSpec> rasters;
   TileSchemeKind scheme = TileSchemeKind::WebMercator;
   std::int32_t tile_triangles = 4096;
   const std::string usage =
@@ -88,11 +78,7 @@ int runExperiments(int argc, char** argv) {
       continue;
     }
     if (!arg.empty() && arg[0] == '-') throw Error(ErrorCode::Usage, "unknown option " + arg + "; " + usage);
-    Raster raster;
-    const std::size_t colon = arg.rfind(':');
-    raster.path = arg.substr(0, colon);
-    if (colon != std::string::npos) raster.tin_max_error_m = bench::parseNumber(arg.substr(colon + 1), "TIN_MAX_ERROR");
-    rasters.push_back(raster);
+    rasters.push_back(bench::parseRasterSpec(arg));
   }
   if (rasters.empty()) throw Error(ErrorCode::Usage, "no raster given; " + usage);
 
@@ -104,7 +90,7 @@ int runExperiments(int argc, char** argv) {
   std::printf("%-34s %-14s %8s %9s %9s  %-34s %-34s %-34s %s\n", "raster @ TIN max error", "split", "clusters",
               "merge", "duplicate", "merge per zoom (finest first)", "duplicate per zoom", "merge max error per level [m]",
               "duplicate max error per level [m]");
-  for (const Raster& raster : rasters) {
+  for (const bench::RasterSpec& raster : rasters) {
     std::fprintf(stderr, "%s: reading and building the TIN\n", raster.path.c_str());
     const DemGrid dem = readDem({raster.path});
     Progress quiet(ProgressMode::Quiet);
@@ -116,8 +102,7 @@ int runExperiments(int argc, char** argv) {
       continue;
     }
     const std::int32_t finest_tiles = base.clusters_per_level.front();
-    char label[160];
-    std::snprintf(label, sizeof label, "%s @%gm", fileName(raster.path).c_str(), raster.tin_max_error_m);
+    const std::string label = bench::rasterLabel(raster);
     struct Split {
       std::string name;
       std::int32_t per_tile;
@@ -128,7 +113,7 @@ int runExperiments(int argc, char** argv) {
     }
     for (const std::int32_t per_tile : {4, 8, 16}) splits.push_back({std::to_string(per_tile) + " per tile", per_tile});
     for (const Split& split : splits) {
-      std::fprintf(stderr, "%s: %s\n", label, split.name.c_str());
+      std::fprintf(stderr, "%s: %s\n", label.c_str(), split.name.c_str());
       const ZoomPlan plan = planZooms(frame, tin, tile_triangles, -1, split.per_tile);
       LevelOptions options;
       options.clusters_per_level = plan.clusters_per_level;
@@ -136,9 +121,7 @@ int runExperiments(int argc, char** argv) {
       // Duplicate simplifies the METIS clusters as they are; merge joins those that cross the
       // same tiles (as build does by default), which unlocks their common borders.
       const std::vector<Level> levels = buildLevels(dem, tin, options, {}, quiet);
-      options.regroup_clusters = [&](const TinMesh& mesh, std::size_t l, const FacePartition& partition) {
-        return groupClustersByTiles(frame, mesh, partition, plan.max_zoom - static_cast<std::int32_t>(l) - 1);
-      };
+      options.regroup_clusters = joinTileClusters(frame, plan.max_zoom);
       const std::vector<Level> joined = buildLevels(dem, tin, options, {}, quiet);
       const Redundancy merge = redundancyOf(frame, joined, plan.max_zoom, Assignment::Merge);
       const Redundancy duplicate = redundancyOf(frame, levels, plan.max_zoom, Assignment::Duplicate);
@@ -155,7 +138,7 @@ int runExperiments(int argc, char** argv) {
       std::vector<double> merge_errors, duplicate_errors;
       for (const Level& level : joined) merge_errors.push_back(level.error.max_error_m);
       for (const Level& level : levels) duplicate_errors.push_back(level.error.max_error_m);
-      std::printf("%-34s %-14s %8d %8.3fx %8.3fx  %-34s %-34s %-34s %s\n", label, split.name.c_str(),
+      std::printf("%-34s %-14s %8d %8.3fx %8.3fx  %-34s %-34s %-34s %s\n", label.c_str(), split.name.c_str(),
                   plan.clusters_per_level.front(), merge.total, duplicate.total, list(merge.per_zoom, "%.2f").c_str(),
                   list(duplicate.per_zoom, "%.2f").c_str(), list(merge_errors, "%.2f").c_str(),
                   list(duplicate_errors, "%.2f").c_str());
