@@ -67,6 +67,7 @@ struct DracoEncoded {
   std::size_t points = 0;  // as the decoder will produce them (Edgebreaker may split vertices)
   std::size_t faces = 0;
   double position_step_m = 0;
+  int position_bits = 0;
 };
 
 DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const Bounds& bounds) {
@@ -102,22 +103,20 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
 
   // Explicit quantisation on the shared grid: origin on a multiple of the step (the mesh
   // translation is on the grid too), range = step * (2^bits - 1) covering the extent.
-  // Draco's entropy coder builds histograms as large as 2^bits, so a tile wider than
-  // step * 2^max_position_bits (8 km at 1/128 m and 20 bits: coarse zooms of large datasets)
-  // doubles its step until it fits; that step is still a multiple of the shared one.
-  double step = options.position_step_m;
-  double extent = 0;
-  for (int k = 0; k < 3; ++k) extent = std::max(extent, bounds.max[k] - bounds.min[k]);
-  const int max_bits = std::clamp(options.max_position_bits, 8, 30);
-  while (step * (std::ldexp(1.0, max_bits) - 1) < extent + step) step *= 2;
+  const double step = options.position_step_m;
   float origin[3];
-  extent = 0;
+  double extent = 0;
   for (int k = 0; k < 3; ++k) {
     origin[k] = static_cast<float>(std::floor(bounds.min[k] / step) * step);
     extent = std::max(extent, bounds.max[k] - origin[k]);
   }
-  int bits = 1;
-  while (bits < max_bits && step * (std::ldexp(1.0, bits) - 1) < extent) ++bits;
+  const int bits = std::max(1, positionBitsFor(extent, step));
+  if (bits > std::min(options.max_position_bits, 30)) {
+    throw Error(ErrorCode::Internal, "a tile spans " + std::to_string(extent) + " m: " + std::to_string(bits) +
+                                         " quantisation bits at a step of " + std::to_string(step) +
+                                         " m, more than the " + std::to_string(options.max_position_bits) +
+                                         " allowed; the step should have been widened (sharedPositionStep)");
+  }
   const float range = static_cast<float>(step * (std::ldexp(1.0, bits) - 1));
 
   draco::Encoder encoder;
@@ -126,7 +125,7 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
   if (normal_id >= 0) {
     encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, options.normal_bits);
   }
-  encoder.SetSpeedOptions(options.encoding_speed, options.encoding_speed);
+  encoder.SetSpeedOptions(options.encoding_speed, options.encoding_speed);  // decoding speed does not change the size
   encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
   encoder.SetTrackEncodedProperties(true);  // accessor counts must match the decoded mesh
   draco::EncoderBuffer out;
@@ -141,12 +140,26 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
   encoded.points = encoder.num_encoded_points();
   encoded.faces = encoder.num_encoded_faces();
   encoded.position_step_m = step;
+  encoded.position_bits = bits;
   return encoded;
 }
 
 }  // namespace
 
 double snapToStep(double value, double step) { return std::round(value / step) * step; }
+
+int positionBitsFor(double extent_m, double step) {
+  int bits = 0;
+  while (bits < 62 && step * (std::ldexp(1.0, bits) - 1) < extent_m) ++bits;
+  return bits;
+}
+
+double sharedPositionStep(double widest_extent_m, double base_step, int max_bits) {
+  double step = base_step;
+  // One step of margin: a tile's origin is its minimum snapped down to the grid.
+  while (positionBitsFor(widest_extent_m + step, step) > max_bits) step *= 2;
+  return step;
+}
 
 EncodedGlb encodeGlb(const GlbMesh& mesh, const GlbOptions& options) {
   TERRATILES_ASSERT(mesh.positions.size() % 3 == 0 && mesh.triangle_indices.size() % 3 == 0);
@@ -177,6 +190,7 @@ EncodedGlb encodeGlb(const GlbMesh& mesh, const GlbOptions& options) {
   if (options.draco) {
     const DracoEncoded draco = encodeDraco(mesh, options, bounds);
     result.position_step_m = draco.position_step_m;
+    result.position_bits = draco.position_bits;
     const int view = appendBufferView(model, draco.bytes.data(), draco.bytes.size(), 0);
     primitive.attributes["POSITION"] =
         addAccessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, draco.points);

@@ -97,6 +97,7 @@ struct CheckTile {
   std::vector<std::array<std::uint32_t, 2>> boundary_edges;
   std::vector<std::uint32_t> boundary_vertices;
   double polar_cap_deg = 90;  // triangles at a pole reach down to this |latitude| (left out)
+  double position_step_m = 0; // the position grid of its zoom (build.json)
 };
 
 json readJson(const fs::path& path) {
@@ -362,6 +363,43 @@ std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, do
   return missing;
 }
 
+// Outline vertices two touching contents share (the same DEM point: back on the grid within a
+// quarter pixel of one pixel centre in both) and how far apart they decode.
+constexpr double kSharedVertexGap_m = 1e-3;
+
+struct SharedVertexGaps {
+  std::size_t shared = 0;
+  std::size_t too_far = 0;  // further apart than allowed_m
+  double worst_m = 0;
+};
+
+SharedVertexGaps sharedVertexGaps(const CheckTile& a, const CheckTile& b, double allowed_m) {
+  const auto pixelOf = [](const std::array<double, 2>& p, std::pair<std::int64_t, std::int64_t>& key) {
+    const double col = std::round(p[0]), row = std::round(p[1]);
+    if (std::fabs(p[0] - col) > 0.25 || std::fabs(p[1] - row) > 0.25) return false;
+    key = {static_cast<std::int64_t>(col), static_cast<std::int64_t>(row)};
+    return true;
+  };
+  std::map<std::pair<std::int64_t, std::int64_t>, std::uint32_t> outline_of_b;
+  std::pair<std::int64_t, std::int64_t> key;
+  for (const std::uint32_t v : b.boundary_vertices) {
+    if (pixelOf(b.vertex_grid[v], key)) outline_of_b.emplace(key, v);
+  }
+  SharedVertexGaps gaps;
+  for (const std::uint32_t v : a.boundary_vertices) {
+    if (!pixelOf(a.vertex_grid[v], key)) continue;
+    const auto found = outline_of_b.find(key);
+    if (found == outline_of_b.end()) continue;
+    const auto& p = a.vertex_ecef[v];
+    const auto& q = b.vertex_ecef[found->second];
+    const double gap = std::hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+    ++gaps.shared;
+    gaps.worst_m = std::max(gaps.worst_m, gap);
+    if (gap > allowed_m) ++gaps.too_far;
+  }
+  return gaps;
+}
+
 bool touching(const TileKey& a, const TileKey& b) {
   const std::int32_t zoom = std::max(a.zoom, b.zoom);
   const auto span = [zoom](const TileKey& k, std::int32_t v) {
@@ -411,7 +449,14 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   if (build.value("heights", std::string("orthometric")) == "orthometric") {
     geoid = readGeoidGrid(build.at("geoid").get<std::string>());
   }
+  // The quantisation grid of each zoom (older outputs: the widest for all).
   const double step_m = build.value("position_step_m", 1.0 / 128);
+  for (CheckTile& tile : tiles) {
+    tile.position_step_m = step_m;
+    if (build.contains("position_step_m_by_zoom")) {
+      tile.position_step_m = build["position_step_m_by_zoom"].value(std::to_string(tile.key.zoom), step_m);
+    }
+  }
   progress.endStage();
   const std::array<double, 2> metres_per_pixel = groundMetresPerPixel(dem);
   OGRSpatialReference dem_crs;
@@ -421,7 +466,8 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   progress.beginStage("decoding and rasterising tiles", tiles.size());
   tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
     if (!tiles[i].uri.empty()) {
-      rasteriseTile(dir, dem, dem_crs, geoid ? &*geoid : nullptr, step_m, metres_per_pixel, tiles[i]);
+      rasteriseTile(dir, dem, dem_crs, geoid ? &*geoid : nullptr, std::max(tiles[i].position_step_m, 1e-9),
+                    metres_per_pixel, tiles[i]);
     }
   });
   progress.advance(tiles.size());
@@ -557,38 +603,61 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   }
   progress.endStage();
 
-  // ---- 3. vertex correspondence between touching tiles one zoom apart ----
+  // ---- 3. vertex correspondence between touching tiles one zoom apart, and the decoded
+  //      positions of the outline vertices touching tiles share ----
   {
     progress.beginStage("vertex correspondence", 0);
-    // On an edge: within one quantisation step of it. Decoding moves a vertex and an edge by
-    // up to 0.87 step each, so an exact T-junction may read up to 1.7 steps off and a lattice
-    // point passing an edge within a step reads as one: the figure is exact to a step.
-    const double tolerance_px = step_m / std::max(metres_per_pixel[0], metres_per_pixel[1]);
-    // 1 mm, or the quantisation where a wide tile used a wider step than its neighbour (both
-    // are on grids of the widest step's multiples only when the steps agree).
-    const double same_position_m = std::max(1e-3, 2 * step_m);
-    std::vector<std::array<int, 2>> pairs;
+    std::vector<std::array<int, 2>> pairs;  // one zoom apart (not parent and child) or neighbours at one zoom
     for (std::size_t i = 0; i < tiles.size(); ++i) {
       for (std::size_t j = 0; j < tiles.size(); ++j) {
-        if (tiles[i].uri.empty() || tiles[j].uri.empty() || tiles[j].key.zoom != tiles[i].key.zoom + 1) continue;
-        if (!touching(tiles[i].key, tiles[j].key) || isAncestor(static_cast<int>(i), static_cast<int>(j), tiles)) continue;
-        pairs.push_back({static_cast<int>(i), static_cast<int>(j)});
+        if (tiles[i].uri.empty() || tiles[j].uri.empty() || !touching(tiles[i].key, tiles[j].key)) continue;
+        const bool one_zoom_apart = tiles[j].key.zoom == tiles[i].key.zoom + 1 &&
+                                    !isAncestor(static_cast<int>(i), static_cast<int>(j), tiles);
+        const bool same_zoom = tiles[j].key.zoom == tiles[i].key.zoom && i < j;
+        if (one_zoom_apart || same_zoom) pairs.push_back({static_cast<int>(i), static_cast<int>(j)});
       }
     }
     std::vector<std::size_t> missing(pairs.size(), 0);
+    std::vector<SharedVertexGaps> gaps(pairs.size());
     tbb::parallel_for(std::size_t{0}, pairs.size(), [&](std::size_t k) {
-      const CheckTile& coarse = tiles[static_cast<std::size_t>(pairs[k][0])];
-      const CheckTile& fine = tiles[static_cast<std::size_t>(pairs[k][1])];
-      missing[k] = missingBorderVertices(coarse, fine, tolerance_px, same_position_m) +
-                   missingBorderVertices(fine, coarse, tolerance_px, same_position_m);
+      const CheckTile& a = tiles[static_cast<std::size_t>(pairs[k][0])];
+      const CheckTile& b = tiles[static_cast<std::size_t>(pairs[k][1])];
+      // A vertex both contents hold decodes to one position when both zooms share a grid:
+      // allow 1 mm. Where a wide zoom uses a coarser grid, the coarser tile rounds it to
+      // its own step: allow twice that.
+      const double step = std::max(a.position_step_m, b.position_step_m);
+      const double allowed_m = a.position_step_m == b.position_step_m ? kSharedVertexGap_m
+                                                                      : std::max(kSharedVertexGap_m, 2 * step);
+      gaps[k] = sharedVertexGaps(a, b, allowed_m);
+      if (a.key.zoom != b.key.zoom) {
+        // On an edge: within one quantisation step of it. Decoding moves a vertex and an edge by
+        // up to 0.87 step each, so an exact T-junction may read up to 1.7 steps off and a lattice
+        // point passing an edge within a step reads as one: the figure is exact to a step.
+        const double tolerance_px = step / std::max(metres_per_pixel[0], metres_per_pixel[1]);
+        missing[k] = missingBorderVertices(a, b, tolerance_px, allowed_m) +
+                     missingBorderVertices(b, a, tolerance_px, allowed_m);
+      }
     });
-    report.neighbour_pairs = pairs.size();
     for (std::size_t k = 0; k < pairs.size(); ++k) {
+      const CheckTile& a = tiles[static_cast<std::size_t>(pairs[k][0])];
+      const CheckTile& b = tiles[static_cast<std::size_t>(pairs[k][1])];
+      if (a.key.zoom != b.key.zoom) ++report.neighbour_pairs;
       report.missing_border_vertices += missing[k];
       if (missing[k] > 0) {
-        problem("tiles " + keyText(tiles[static_cast<std::size_t>(pairs[k][0])].key) + " and " +
-                keyText(tiles[static_cast<std::size_t>(pairs[k][1])].key) + ": " + std::to_string(missing[k]) +
+        problem("tiles " + keyText(a.key) + " and " + keyText(b.key) + ": " + std::to_string(missing[k]) +
                 " outline vertices of one lie on an outline edge of the other without a vertex there");
+      }
+      report.shared_border_vertices += gaps[k].shared;
+      report.shared_vertex_gaps += gaps[k].too_far;
+      if (a.position_step_m == b.position_step_m) {
+        report.worst_shared_vertex_gap_m = std::max(report.worst_shared_vertex_gap_m, gaps[k].worst_m);
+      } else {
+        report.worst_shared_vertex_gap_coarser_grid_m =
+            std::max(report.worst_shared_vertex_gap_coarser_grid_m, gaps[k].worst_m);
+      }
+      if (gaps[k].too_far > 0) {
+        problem("tiles " + keyText(a.key) + " and " + keyText(b.key) + ": " + std::to_string(gaps[k].too_far) +
+                " shared outline vertices decode " + std::to_string(gaps[k].worst_m * 1000) + " mm apart");
       }
     }
     progress.endStage();
@@ -644,6 +713,12 @@ std::string describeCheck(const CheckReport& r) {
        << r.unbalanced_cuts_with_holes << " with holes (" << r.unbalanced_hole_pixels << " pixels; reported only)\n";
   text << "  vertices: " << r.neighbour_pairs << " pairs of touching tiles one zoom apart, "
        << r.missing_border_vertices << " outline vertices missing where their contents meet\n";
+  text << "  shared:   " << r.shared_border_vertices << " outline vertices two touching tiles share (same zoom or "
+       << "one apart), worst gap " << r.worst_shared_vertex_gap_m * 1000 << " mm on one grid";
+  if (r.worst_shared_vertex_gap_coarser_grid_m > 0) {
+    text << ", " << r.worst_shared_vertex_gap_coarser_grid_m * 1000 << " mm where a zoom uses a coarser grid";
+  }
+  text << "; " << r.shared_vertex_gaps << " too far apart\n";
   text << "  overlap:  " << r.overlap_pixels << " pixels covered at two adjacent zooms, " << r.overlap_disagreements
        << " differ by more than the coarser geometricError (worst " << r.worst_overlap_ratio << " of it)\n";
   text << "  errors:   " << r.dishonest_errors << " tiles whose measured error exceeds their geometricError (worst "

@@ -17,6 +17,8 @@
 //      (not parent and child), an outline vertex of one that lies on an outline edge of the
 //      other must be a vertex of it, at the same decoded position (within 1 mm, or twice
 //      the widest quantisation step used): no T-junction where the two contents meet;
+//      Every outline vertex two touching tiles (also neighbours at one zoom) both hold must
+//      decode to one position in both: within 1 mm where their zooms share a grid;
 //   4. honest errors: every tile's geometricError >= the max vertical error of its decoded
 //      content against the DEM (to the quantisation step) and >= its children's; every
 //      parent's region contains its children's.
@@ -50,6 +52,13 @@ struct CheckReport {
   std::size_t unbalanced_hole_pixels = 0;
   std::size_t neighbour_pairs = 0;        // touching tiles one zoom apart (not parent and child)
   std::size_t missing_border_vertices = 0;
+  // Outline vertices that touching tiles (one zoom apart, or neighbours at one zoom) both
+  // hold, and how far apart they decode: within 1 mm where both zooms share a grid, within
+  // two of the coarser steps where a wide zoom uses a coarser one.
+  std::size_t shared_border_vertices = 0;
+  std::size_t shared_vertex_gaps = 0;  // pairs further apart than that
+  double worst_shared_vertex_gap_m = 0;              // between tiles on one grid
+  double worst_shared_vertex_gap_coarser_grid_m = 0; // where the two zooms' grids differ
   std::size_t overlap_pixels = 0;         // pixels covered at two adjacent zooms
   std::size_t overlap_disagreements = 0;
   double worst_overlap_ratio = 0;         // max |dh| / geometricError over the overlaps
@@ -60,7 +69,8 @@ struct CheckReport {
   std::vector<std::string> problems;      // the first few violations, one line each
 
   bool ok() const {
-    return cuts_with_holes == 0 && overlap_disagreements == 0 && missing_border_vertices == 0 && dishonest_errors == 0 &&
+    return cuts_with_holes == 0 && overlap_disagreements == 0 && missing_border_vertices == 0 && shared_vertex_gaps == 0 &&
+           dishonest_errors == 0 &&
            error_order_violations == 0 && region_violations == 0;
   }
 };

@@ -54,6 +54,20 @@ void validateOptions(const BuildOptions& options) {
   if (!(options.level_ratio >= 0.01 && options.level_ratio <= 0.99)) {
     throw Error(ErrorCode::Usage, "--level-ratio is " + std::to_string(options.level_ratio) + "; expected 0.01 to 0.99");
   }
+  if (options.draco_position_bits != 0 &&
+      (options.draco_position_bits < 8 || options.draco_position_bits > kMaxExactPositionBits)) {
+    throw Error(ErrorCode::Usage, "--draco-position-bits is " + std::to_string(options.draco_position_bits) +
+                                      "; expected 8 to " + std::to_string(kMaxExactPositionBits) +
+                                      " (Draco quantises exactly within 2^23 steps)");
+  }
+  if (options.draco_normal_bits < 4 || options.draco_normal_bits > 16) {
+    throw Error(ErrorCode::Usage, "--draco-normal-bits is " + std::to_string(options.draco_normal_bits) +
+                                      "; expected 4 to 16");
+  }
+  if (options.draco_speed < 0 || options.draco_speed > 10) {
+    throw Error(ErrorCode::Usage, "--draco-speed is " + std::to_string(options.draco_speed) +
+                                      "; expected 0 (smallest) to 10 (fastest)");
+  }
   const double bits = std::log2(options.position_step_m);
   if (!(options.position_step_m > 0) || bits != std::round(bits) || bits > 0 || bits < -16) {
     throw Error(ErrorCode::Usage, "--position-step must be a power of two between 1/65536 and 1 m");
@@ -112,11 +126,34 @@ struct EncodedTile {
   std::vector<std::uint8_t> glb;
   Region region;
   std::size_t vertices = 0;
-  double position_step_m = 0;  // the quantisation step Draco used (wider for wide tiles)
+  int position_bits = 0;  // Draco position bits at the zoom's step
 };
+
+// The largest side of a tile's ECEF box: what its quantisation must span.
+double tileExtent(const PyramidTile& tile, const PlacedLevel& placed) {
+  EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (std::uint32_t v : tile.triangle_indices) {
+    const EcefPoint& p = placed.ecef[v];
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  return std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 0.0});
+}
+
+// The step every tile of a zoom shares: the base step, or a power-of-two multiple of it
+// where the zoom's widest tile would need more than max_bits.
+double zoomPositionStep(const std::vector<PyramidTile>& tiles, const PlacedLevel& placed, double base_step,
+                        int max_bits) {
+  double widest = 0;
+  for (const PyramidTile& tile : tiles) widest = std::max(widest, tileExtent(tile, placed));
+  return sharedPositionStep(widest, base_step, max_bits);
+}
 
 // One tile's content: its vertices relative to an origin on the quantisation grid, in the
 // glTF y-up frame (glTF (x, y, z) = ECEF (X, Z, -Y); 3D Tiles rotates y-up back to z-up).
+// Every position is snapped to the grid before it is made relative, so the float offsets are
+// exact and Draco gives them back bit for bit: a vertex two tiles of a zoom share decodes to
+// one position in both.
 EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const GlbOptions& glb) {
   EncodedTile out;
   std::map<std::uint32_t, std::uint32_t> local_of;  // level vertex -> tile vertex
@@ -136,28 +173,29 @@ EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const
     const GeodeticPoint& g = placed.geodetic[v];
     out.region.include(g.lon_deg * kDegToRad, g.lat_deg * kDegToRad, g.height_m);
   }
+  // Plain GLBs too: their float offsets are then exact as well.
   const double step = glb.position_step_m;
-  const EcefPoint origin{snapToStep((lo.x + hi.x) / 2, step), snapToStep((lo.y + hi.y) / 2, step),
-                         snapToStep((lo.z + hi.z) / 2, step)};
+  auto snap = [step](double value) { return snapToStep(value, step); };
+  const EcefPoint origin{snap((lo.x + hi.x) / 2), snap((lo.y + hi.y) / 2), snap((lo.z + hi.z) / 2)};
   mesh.translation = {origin.x, origin.z, -origin.y};
   mesh.positions.reserve(level_vertex.size() * 3);
   mesh.normals.reserve(level_vertex.size() * 3);
   for (std::uint32_t v : level_vertex) {
     const EcefPoint& p = placed.ecef[v];
     const EcefPoint& n = placed.normals[v];
-    mesh.positions.insert(mesh.positions.end(), {static_cast<float>(p.x - origin.x),
-                                                 static_cast<float>(p.z - origin.z),
-                                                 static_cast<float>(-(p.y - origin.y))});
+    mesh.positions.insert(mesh.positions.end(), {static_cast<float>(snap(p.x) - origin.x),
+                                                 static_cast<float>(snap(p.z) - origin.z),
+                                                 static_cast<float>(-(snap(p.y) - origin.y))});
     mesh.normals.insert(mesh.normals.end(),
                         {static_cast<float>(n.x), static_cast<float>(n.z), static_cast<float>(-n.y)});
   }
   out.vertices = level_vertex.size();
   EncodedGlb encoded = encodeGlb(mesh, glb);
   out.glb = std::move(encoded.bytes);
+  out.position_bits = encoded.position_bits;
   // The region must hold the decoded content: grow it by the quantisation step (decoded
   // positions are within half a step per axis, sqrt(3)/2 step in all).
   const double grow_m = encoded.position_step_m;
-  out.position_step_m = encoded.position_step_m;
   if (grow_m > 0) {
     constexpr double kMinimumRadius_m = 6.3e6;  // below any WGS84 radius of curvature
     const double grow_lat = grow_m / kMinimumRadius_m;
@@ -410,8 +448,20 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   GlbOptions glb;
   glb.draco = options.draco;
-  glb.position_step_m = options.position_step_m;
+  glb.normal_bits = options.draco_normal_bits;
+  glb.encoding_speed = options.draco_speed;
   glb.generator = std::string("terratiles ") + kVersion;
+  // The shared quantisation grid: --position-step, or the step at which the finest zoom's
+  // widest tile takes --draco-position-bits.
+  double base_step_m = options.position_step_m;
+  if (options.draco_position_bits > 0) {
+    const ZoomContent& finest = zooms.back();
+    const PlacedLevel placed = placeLevel(dem, *finest.mesh, to_wgs84, geoid ? &*geoid : nullptr);
+    double widest = 0;
+    for (const PyramidTile& tile : finest.tiles) widest = std::max(widest, tileExtent(tile, placed));
+    base_step_m = sharedPositionStep(widest, std::ldexp(1.0, -30), options.draco_position_bits);
+  }
+  summary.position_step_m = base_step_m;
 
   std::size_t total_tiles = 0;
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
@@ -420,7 +470,12 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   double widest_step_m = 0;
   for (const ZoomContent& level : zooms) {
     const PlacedLevel placed = placeLevel(dem, *level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
+    // One grid per zoom: the base step, unless the zoom's widest tile needs more than the
+    // 2^23 steps Draco quantises exactly (tiles wider than about 65 km at 1/128 m).
+    glb.position_step_m = zoomPositionStep(level.tiles, placed, base_step_m, kMaxExactPositionBits);
+    widest_step_m = std::max(widest_step_m, glb.position_step_m);
     ZoomSummary zoom_summary;
+    zoom_summary.position_step_m = glb.position_step_m;
     zoom_summary.zoom = level.zoom;
     zoom_summary.step_pixels = level.step;
     zoom_summary.clusters = level.clusters;
@@ -449,7 +504,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         // Measured: against the DEM and against the next finer zoom where both are drawn.
         node.geometric_error_m = std::max(tile.max_error_m, tile.finer_difference_m);
         zoom_summary.bytes += output.writeFile(node.content_uri, encoded[i - begin].glb);
-        widest_step_m = std::max(widest_step_m, encoded[i - begin].position_step_m);
+        zoom_summary.position_bits = std::max(zoom_summary.position_bits, encoded[i - begin].position_bits);
         nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
         progress.advance();
       }
@@ -522,7 +577,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     facts["geoid"] = geoid ? std::filesystem::absolute(options.geoid_path.empty() ? kDefaultGeoidPath
                                                                                  : options.geoid_path).string()
                            : std::string();
-    facts["position_step_m"] = std::max(options.position_step_m, widest_step_m);  // the widest any tile used
+    facts["position_step_m"] = widest_step_m;  // the widest any zoom used
+    nlohmann::json steps = nlohmann::json::object();
+    for (const ZoomSummary& z : summary.zooms) steps[std::to_string(z.zoom)] = z.position_step_m;
+    facts["position_step_m_by_zoom"] = steps;
     summary.bytes += output.writeFile("build.json", facts.dump(2) + "\n");
   }
   // tileset.json last, then the whole directory moves into place.

@@ -48,7 +48,13 @@ struct BuildOptions {
   HeightReference heights = HeightReference::Orthometric;
   std::string geoid_path;              // empty: EGM96 from Debian's proj-data
   bool draco = true;
-  double position_step_m = 1.0 / 128;  // shared Draco quantisation grid
+  // The Draco quantisation grid every tile shares (a power of two in metres): 1/128 m, or
+  // (draco_position_bits > 0) the step at which the finest zoom's widest tile takes that
+  // many bits. A zoom whose tiles are too wide for 2^23 steps uses a power-of-two multiple.
+  double position_step_m = 1.0 / 128;
+  std::int32_t draco_position_bits = 0;
+  std::int32_t draco_normal_bits = 10;
+  std::int32_t draco_speed = 3;  // measured: 15-17 % smaller than 5 and within 3 % of 0, decoding 1.4x faster than 0
 };
 
 struct ZoomSummary {
@@ -63,6 +69,8 @@ struct ZoomSummary {
   double max_error_m = 0;   // measured against the DEM
   double rms_error_m = 0;
   double geometric_error_m = 0;  // the largest geometricError written at this zoom
+  double position_step_m = 0;    // the Draco grid all its tiles share (0: plain GLB)
+  int position_bits = 0;         // the most quantisation bits one of its tiles needed
 };
 
 struct BuildSummary {
@@ -84,6 +92,7 @@ struct BuildSummary {
   std::size_t triangles = 0;
   std::size_t bytes = 0;
   double worst_error_m = 0;  // over the non-leaf zooms (the leaves hold the DEM itself)
+  double position_step_m = 0;  // the base quantisation grid (the finest zooms')
   double seconds = 0;
 };
 

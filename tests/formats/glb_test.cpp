@@ -5,6 +5,7 @@
 
 #include "formats/gltf/read_glb.h"
 #include "formats/gltf/write_glb.h"
+#include "src/base/error.h"
 
 using namespace terratiles;
 
@@ -105,20 +106,26 @@ TEST_SUITE("formats") {
     CHECK(std::hypot(pa[0] - shared[0], pa[1] - shared[1], pa[2] - shared[2]) < step);
   }
 
-  TEST_CASE("a tile wider than the bit budget quantises on a coarser multiple of the step") {
+  TEST_CASE("tiles too wide for the bit budget share a coarser power-of-two step") {
+    const double base = 1.0 / 128;
+    // 50 km takes 23 bits at 1/128 m: within 23 bits the base step stays.
+    CHECK(positionBitsFor(50000, base) == 23);
+    CHECK(sharedPositionStep(50000, base, 23) == base);
+    // Within 20 bits it must widen to 1/16 m (2^20 - 1 steps of 1/32 m are 32.8 km).
+    CHECK(sharedPositionStep(50000, base, 20) == base * 8);
+    CHECK(positionBitsFor(50000 + base * 8, base * 8) <= 20);
+    CHECK(positionBitsFor(50000 + base * 4, base * 4) > 20);
+
     GlbMesh wide = patch(4, {0, 0, 0});
-    wide.positions[0] = 50000.0f;  // 50 km: more than 2^20 steps of 1/128 m
+    wide.positions[0] = 50000.0f;
     GlbOptions options;
+    options.max_position_bits = 20;
+    CHECK_THROWS_AS(encodeGlb(wide, options), Error);  // the caller must widen the step first
+    options.position_step_m = sharedPositionStep(50000, base, 20);
     const EncodedGlb encoded = encodeGlb(wide, options);
-    CHECK(encoded.position_step_m == options.position_step_m * 8);  // 2^20 * 8 / 128 > 50 km
+    CHECK(encoded.position_step_m == base * 8);
+    CHECK(encoded.position_bits <= 20);
     const DecodedGlb decoded = decodeGlb(encoded.bytes, "wide.glb");
-    double worst = 0;
-    for (std::size_t v = 0; v < decoded.mesh.vertexCount(); ++v) {
-      for (int k = 0; k < 3; ++k) {
-        worst = std::max(worst, static_cast<double>(std::fabs(decoded.mesh.positions[3 * v + k] -
-                                                              wide.positions[3 * v + k])));
-      }
-    }
     // Draco reorders vertices; the extreme vertex still decodes within half the step used.
     bool found = false;
     for (std::size_t v = 0; v < decoded.mesh.vertexCount(); ++v) {

@@ -36,6 +36,10 @@ void checkSeamless(const CheckReport& report) {
   CHECK(report.cuts_with_holes == 0);
   CHECK(report.neighbour_pairs > 0);
   CHECK(report.missing_border_vertices == 0);
+  // Outline vertices touching tiles share decode to one position (both on one grid).
+  CHECK(report.shared_border_vertices > 0);
+  CHECK(report.shared_vertex_gaps == 0);
+  CHECK(report.worst_shared_vertex_gap_m <= 1e-3);
   CHECK(report.overlap_pixels > 0);
   CHECK(report.overlap_disagreements == 0);
   CHECK(report.dishonest_errors == 0);

@@ -77,17 +77,24 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
   for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
-  text << "  zoom clusters  tiles   triangles  redundancy        bytes   max err m   rms err m  geomError m\n";
+  text << "  zoom clusters  tiles   triangles  redundancy        bytes  B/tri  step mm   max err m   rms err m  geomError m\n";
+  std::size_t tile_triangles = 0;
   for (const ZoomSummary& z : s.zooms) {
+    tile_triangles += z.tile_triangles;
     text << "  " << std::setw(4) << z.zoom << std::setw(9) << (z.step_pixels ? z.step_pixels : z.clusters) << std::setw(7)
          << z.tiles << std::setw(12) << z.triangles << std::setw(12) << std::setprecision(3)
          << (z.triangles ? static_cast<double>(z.tile_triangles) / static_cast<double>(z.triangles) : 0.0)
-         << std::setw(13) << z.bytes
+         << std::setw(13) << z.bytes << std::setprecision(2) << std::setw(7)
+         << (z.tile_triangles ? static_cast<double>(z.bytes) / static_cast<double>(z.tile_triangles) : 0.0)
+         << std::setprecision(1) << std::setw(9) << z.position_step_m * 1000
          << std::setprecision(3) << std::setw(12) << z.max_error_m << std::setw(12)
          << z.rms_error_m << std::setw(13) << z.geometric_error_m << "\n";
   }
   text << "  total " << s.tiles << " tiles, " << s.triangles << " triangles, "
-       << humanBytes(s.bytes) << ", worst measured error " << std::setprecision(2)
+       << humanBytes(s.bytes) << " (" << std::setprecision(2)
+       << (tile_triangles ? static_cast<double>(s.bytes) / static_cast<double>(tile_triangles) : 0.0)
+       << " B per tile triangle, finest step " << std::setprecision(1) << s.position_step_m * 1000
+       << " mm), worst measured error " << std::setprecision(2)
        << s.worst_error_m << " m, " << s.seconds << " s\n";
   text << "  view it: node samples/viewer/serve.mjs " << s.output_dir
        << "  (then open the printed URL; see README)\n";
@@ -407,10 +414,21 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->check(CLI::ExistingFile);
   build_command->add_flag("--no-draco", [&build](std::int64_t) { build.draco = false; },
                           "Write plain GLB without KHR_draco_mesh_compression");
+  CLI::Option* position_step =
+      build_command
+          ->add_option("--position-step", build.position_step_m,
+                       "Draco position quantisation grid in metres (a power of two) that all tiles share; a zoom "
+                       "whose tiles span more than 2^23 steps uses a power-of-two multiple")
+          ->capture_default_str();
   build_command
-      ->add_option("--position-step", build.position_step_m,
-                   "Draco position quantisation step in metres (power of two), shared by all "
-                   "tiles")
+      ->add_option("--draco-position-bits", build.draco_position_bits,
+                   "Instead of --position-step: the grid at which the finest zoom's widest tile takes B bits (8-23)")
+      ->excludes(position_step);
+  build_command
+      ->add_option("--draco-normal-bits", build.draco_normal_bits, "Draco normal quantisation bits (4-16)")
+      ->capture_default_str();
+  build_command
+      ->add_option("--draco-speed", build.draco_speed, "Draco encoder speed, 0 (smallest files) to 10 (fastest)")
       ->capture_default_str();
   addProgressOptions(*build_command, quiet, progress_choice);
 
