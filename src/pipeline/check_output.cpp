@@ -24,6 +24,7 @@
 #include "src/lod/build_levels.h"
 #include "src/tiling/tile_key.h"
 #include "src/tin/measure_tin.h"
+#include "tileset/implicit_tileset.h"
 
 namespace terratiles {
 namespace {
@@ -117,6 +118,7 @@ json readJson(const fs::path& path) {
 bool keyFromUri(const std::string& uri, TileKey& key) {
   int z = 0, x = 0, y = 0;
   char tail[8] = {};
+  if (tileKeyFromImplicitUri(uri, key)) return true;
   if (std::sscanf(uri.c_str(), "tiles/%d/%d/%d.%4s", &z, &x, &y, tail) != 4) return false;
   key = {z, x, y};
   return true;
@@ -440,7 +442,8 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   const json build = readJson(dir / "build.json");
   CheckReport report;
   std::vector<CheckTile> tiles;
-  addTile(tileset.at("root"), -1, tiles);
+  // Implicit output: build.json holds the same tree as an explicit tileset.
+  addTile(build.contains("explicit_tileset") ? build["explicit_tileset"].at("root") : tileset.at("root"), -1, tiles);
 
   std::vector<std::string> inputs = build.at("inputs").get<std::vector<std::string>>();
   progress.beginStage("reading the DEM", 0);

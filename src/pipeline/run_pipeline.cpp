@@ -25,6 +25,7 @@
 #include "src/lod/build_levels.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/tin/measure_tin.h"
+#include "tileset/implicit_tileset.h"
 #include "tileset/tileset.h"
 
 namespace terratiles {
@@ -67,6 +68,17 @@ void validateOptions(const BuildOptions& options) {
   if (options.draco_speed < 0 || options.draco_speed > 10) {
     throw Error(ErrorCode::Usage, "--draco-speed is " + std::to_string(options.draco_speed) +
                                       "; expected 0 (smallest) to 10 (fastest)");
+  }
+  if (options.implicit_tiling && (options.lod != LodMethod::Clusters || options.scheme != TileSchemeKind::Geographic)) {
+    throw Error(ErrorCode::Usage, std::string("--implicit is for the geographic scheme; found --scheme ") +
+                                      (options.lod == LodMethod::Grid ? std::string("local pixels (--lod grid)")
+                                                                      : std::string(tileSchemeName(options.scheme))) +
+                                      "; add --scheme geographic (its quadtree subdivides a region as 3D Tiles "
+                                      "implicit tiling does)");
+  }
+  if (options.subtree_levels < 1 || options.subtree_levels > kMaxSubtreeLevels) {
+    throw Error(ErrorCode::Usage, "--subtree-levels is " + std::to_string(options.subtree_levels) + "; expected 1 to " +
+                                      std::to_string(kMaxSubtreeLevels));
   }
   const double bits = std::log2(options.position_step_m);
   if (!(options.position_step_m > 0) || bits != std::round(bits) || bits > 0 || bits < -16) {
@@ -499,7 +511,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         const PyramidTile& tile = level.tiles[i];
         TileNode node;
         node.key = tile.key;
-        node.content_uri = "tiles/" + tile.key.path() + ".glb";
+        node.content_uri = options.implicit_tiling ? implicitContentUri(tile.key) : "tiles/" + tile.key.path() + ".glb";
         node.region = encoded[i - begin].region;
         // Measured: against the DEM and against the next finer zoom where both are drawn.
         node.geometric_error_m = std::max(tile.max_error_m, tile.finer_difference_m);
@@ -581,10 +593,19 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     nlohmann::json steps = nlohmann::json::object();
     for (const ZoomSummary& z : summary.zooms) steps[std::to_string(z.zoom)] = z.position_step_m;
     facts["position_step_m_by_zoom"] = steps;
+    facts["tiling"] = options.implicit_tiling ? "implicit" : "explicit";
+    // Implicit output: the same tree as an explicit tileset, for `terratiles check`.
+    if (options.implicit_tiling) facts["explicit_tileset"] = nlohmann::json::parse(tilesetToJson(tileset));
     summary.bytes += output.writeFile("build.json", facts.dump(2) + "\n");
   }
   // tileset.json last, then the whole directory moves into place.
-  summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
+  if (options.implicit_tiling) {
+    for (const ImplicitFile& file : writeImplicitTileset(tileset, options.subtree_levels)) {
+      summary.bytes += output.writeFile(file.path, file.bytes);
+    }
+  } else {
+    summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
+  }
   progress.throwIfCancelled();
   output.commit();
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -48,6 +48,10 @@ struct BuildOptions {
   HeightReference heights = HeightReference::Orthometric;
   std::string geoid_path;              // empty: EGM96 from Debian's proj-data
   bool draco = true;
+  // Geographic scheme: 3D Tiles implicit tiling (quadtrees, subtree files, every tile's
+  // measured error and region as tile metadata) instead of an explicit tree.
+  bool implicit_tiling = false;
+  std::int32_t subtree_levels = 6;
   // The Draco quantisation grid every tile shares (a power of two in metres): 1/128 m, or
   // (draco_position_bits > 0) the step at which the finest zoom's widest tile takes that
   // many bits. A zoom whose tiles are too wide for 2^23 steps uses a power-of-two multiple.

@@ -4,12 +4,18 @@
 // centroid (holes) and the grid pyramid (T-junctions) fail: the checker is not blind.
 #include <doctest/doctest.h>
 
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
 #include "src/pipeline/check_output.h"
 #include "tests/test_support.h"
+#include "tileset/implicit_tileset.h"
 
 using namespace terratiles;
 
@@ -80,5 +86,87 @@ TEST_SUITE("check") {
     const auto not_an_output = test::runTerratiles({"check", dir.path().string()});
     CHECK(not_an_output.exit_code == 3);
     CHECK(not_an_output.err.find("tileset.json cannot be read") != std::string::npos);
+  }
+}
+
+TEST_SUITE("check") {
+  TEST_CASE("implicit tiling keeps the explicit tree's tiles, errors and contents, and passes the check") {
+    test::TempDir dir;
+    const std::string input = test::sharedData("srtm3_N57E011_4326.tif");
+    const std::vector<std::string> common{"--scheme", "geographic", "--tin-max-error", "5", "-q"};
+    std::vector<std::string> explicit_args{"build", input, "-o", dir / "explicit"};
+    explicit_args.insert(explicit_args.end(), common.begin(), common.end());
+    REQUIRE(test::runTerratiles(explicit_args).exit_code == 0);
+    std::vector<std::string> implicit_args{"build", input, "-o", dir / "implicit", "--implicit"};
+    implicit_args.insert(implicit_args.end(), common.begin(), common.end());
+    const auto built = test::runTerratiles(implicit_args);
+    CAPTURE(built.err);
+    REQUIRE(built.exit_code == 0);
+
+    const auto readJson = [](const std::string& path) {
+      std::ifstream in(path);
+      return nlohmann::json::parse(in);
+    };
+    const nlohmann::json tileset = readJson(dir / "implicit/tileset.json");
+    CHECK(tileset["asset"]["version"] == "1.1");
+    const nlohmann::json& root = tileset["root"];
+    REQUIRE(root.contains("implicitTiling"));  // N57E011 lies in the east zoom-0 tile only
+    CHECK(root["implicitTiling"]["subdivisionScheme"] == "QUADTREE");
+    CHECK(root["content"]["uri"] == "tiles/east/{level}/{x}/{y}.glb");
+    // Every tile's measured error travels as tile metadata (CesiumJS would halve the root's).
+    bool has_error_semantic = false;
+    for (const auto& [name, property] : tileset["schema"]["classes"]["tile"]["properties"].items()) {
+      has_error_semantic |= property.value("semantic", "") == "TILE_GEOMETRIC_ERROR";
+    }
+    CHECK(has_error_semantic);
+    CHECK(std::filesystem::exists(dir / "implicit/subtrees/east/0/0/0.subtree"));
+
+    // The same tiles with the same errors as the explicit build, each content on disk under
+    // its implicit name and byte for byte the explicit one.
+    std::map<std::string, std::pair<double, std::string>> explicit_tiles, implicit_tiles;
+    std::function<void(const nlohmann::json&, std::map<std::string, std::pair<double, std::string>>&)> collect =
+        [&](const nlohmann::json& node, std::map<std::string, std::pair<double, std::string>>& out) {
+          if (node.contains("content")) {
+            const std::string uri = node["content"]["uri"];
+            TileKey key;
+            if (!tileKeyFromImplicitUri(uri, key)) {
+              REQUIRE(std::sscanf(uri.c_str(), "tiles/%d/%d/%d.glb", &key.zoom, &key.x, &key.y) == 3);
+            }
+            out[key.path()] = {node["geometricError"].get<double>(), uri};
+          }
+          for (const auto& child : node.value("children", nlohmann::json::array())) collect(child, out);
+        };
+    collect(readJson(dir / "explicit/tileset.json")["root"], explicit_tiles);
+    collect(readJson(dir / "implicit/build.json")["explicit_tileset"]["root"], implicit_tiles);
+    REQUIRE(explicit_tiles.size() >= 4);
+    REQUIRE(implicit_tiles.size() == explicit_tiles.size());
+    for (const auto& [key, value] : explicit_tiles) {
+      CAPTURE(key);
+      REQUIRE(implicit_tiles.count(key) == 1);
+      CHECK(implicit_tiles[key].first == value.first);
+      const auto bytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+      };
+      CHECK(bytes(dir / ("implicit/" + implicit_tiles[key].second)) == bytes(dir / ("explicit/" + value.second)));
+    }
+
+    Progress quiet(ProgressMode::Quiet);
+    CheckOptions check;
+    check.cuts = 100;
+    const CheckReport report = checkOutput(dir / "implicit", check, quiet);
+    MESSAGE(describeCheck(report));
+    CHECK(report.tiles == explicit_tiles.size());
+    CHECK(report.ok());
+    const test::GltfValidation gltf = test::validateGltfTree(dir / "implicit");
+    REQUIRE(gltf.ran);
+    CHECK(gltf.files == static_cast<int>(explicit_tiles.size()));
+    CHECK(gltf.errors == 0);
+
+    // Web mercator's rows do not halve a region: implicit tiling is refused, clearly.
+    const auto refused = test::runTerratiles({"build", input, "-o", dir / "refused", "--implicit", "-q"});
+    CHECK(refused.exit_code == 2);
+    CHECK(refused.err.find("--scheme geographic") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "refused"));
   }
 }

@@ -412,6 +412,11 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Geoid grid for orthometric heights, any GDAL raster in lon/lat (e.g. "
                    "CHGeo2004 for LN02 heights) [default: EGM96, /usr/share/proj/egm96_15.gtx]")
       ->check(CLI::ExistingFile);
+  build_command->add_flag("--implicit", build.implicit_tiling,
+                          "Geographic scheme: write 3D Tiles implicit tiling (quadtree, subtree files with tile and "
+                          "content availability, each tile's measured error and region as tile metadata)");
+  build_command->add_option("--subtree-levels", build.subtree_levels, "--implicit: tree levels per subtree file")
+      ->capture_default_str();
   build_command->add_flag("--no-draco", [&build](std::int64_t) { build.draco = false; },
                           "Write plain GLB without KHR_draco_mesh_compression");
   CLI::Option* position_step =
