@@ -460,24 +460,17 @@ std::vector<ImplicitFile> writeImplicitTileset(const Tileset& tileset,
   json["asset"] = {{"version", "1.1"}, {"generator", tileset.generator}};
   json["geometricError"] = tileset.geometric_error_m;
   json["schema"] = schemaJson();
-  if (trees.size() == 1) {
-    json["root"] = implicitRootJson(trees[0], subtree_levels, true);
-  } else {
-    // Data in both hemispheres: an explicit content-less root over the globe, the two
-    // implicit roots its children.
-    constexpr double kPi = std::numbers::pi;
-    nlohmann::json& root = json["root"];
-    root["boundingVolume"]["region"] =
-        regionJson(-kPi, -kPi / 2, kPi, kPi / 2,
-                   std::min(trees[0].min_height_m, trees[1].min_height_m),
-                   std::max(trees[0].max_height_m, trees[1].max_height_m));
-    root["geometricError"] = tileset.root.geometric_error_m;
-    root["refine"] = "REPLACE";
-    root["children"] = nlohmann::json::array();
-    for (const ImplicitTree& tree : trees) {
-      root["children"].push_back(implicitRootJson(tree, subtree_levels, false));
-    }
-  }
+  // An explicit content-less root with the data's region above the implicit root(s) (one
+  // per hemisphere with data): the implicit roots' volumes must be the zoom-0 squares for
+  // the subdivision, but a viewer frames the tileset by its root, which must be the data.
+  nlohmann::json& root = json["root"];
+  const Region& data = tileset.root.region;
+  root["boundingVolume"]["region"] = regionJson(data.west_rad, data.south_rad, data.east_rad, data.north_rad,
+                                                data.min_height_m, data.max_height_m);
+  root["geometricError"] = std::max(tileset.geometric_error_m, tileset.root.geometric_error_m);
+  root["refine"] = "REPLACE";
+  root["children"] = nlohmann::json::array();
+  for (const ImplicitTree& tree : trees) root["children"].push_back(implicitRootJson(tree, subtree_levels, false));
 
   std::vector<ImplicitFile> files;
   const std::string text = json.dump(1, '\t') + "\n";

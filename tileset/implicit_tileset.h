@@ -9,7 +9,8 @@
 //
 // Output layout, paths relative to tileset.json. H is the hemisphere, the zoom-0 tile:
 // "west" (x = 0, lon -180..0) or "east" (x = 1, lon 0..180).
-//   tileset.json                         asset 1.1, schema, the implicit root tile(s)
+//   tileset.json                         asset 1.1, schema, a root framing the data above
+//                                        the implicit root tile(s)
 //   subtrees/H/{level}/{x}/{y}.subtree   one per subtree that holds available tiles
 //   tiles/H/{level}/{x}/{y}.glb          tile content: written by the caller, at
 //                                        implicitContentUri(key)
@@ -70,9 +71,11 @@ struct ImplicitFile {
 // subdivision is the scheme's), heights spanning all its tiles, and whose geometricError is
 // its own. Zoom-0 tiles and ancestors the tree lacks (root above zoom 0) are available and
 // content-less, with the root's region and the larger of the root's and the tileset's
-// error. With data in both hemispheres, tileset.json's root is an explicit content-less
-// tile covering the globe above the two implicit roots (an implicitTiling object may be on
-// any tile, spec "Implicit Root Tile"). Tile metadata repeats every tile's error and region.
+// error. tileset.json's root is an explicit content-less tile with the data's region (the
+// tree root's), so viewers frame the data and not a hemisphere, above the implicit root or
+// the two (an implicitTiling object may be on any tile, spec "Implicit Root Tile"; the
+// 3d-tiles-validator accepts the squares reaching beyond it). Tile metadata repeats every
+// tile's error and region.
 //
 // Deterministic: the same tileset gives the same bytes. Throws Error(Usage) for
 // subtree_levels outside 1..kMaxSubtreeLevels and Error(Input) naming the tile for a tree

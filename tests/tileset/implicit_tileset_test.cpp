@@ -432,8 +432,13 @@ TEST_SUITE("tileset") {
       const nlohmann::json json = tilesetJson(files);
       checkSchema(json);
       CHECK(json["geometricError"] == 5000.0);
+      // An explicit root framing the data (what viewers zoom to) above the implicit root.
       CHECK(json["root"]["refine"] == "REPLACE");
-      checkImplicitRoot(json["root"], "east", levels, 5, 0.0, zoom0, expected);
+      CHECK_FALSE(json["root"].contains("implicitTiling"));
+      CHECK(json["root"]["boundingVolume"]["region"] == regionArray(tileset.root.region));
+      CHECK(json["root"]["geometricError"] == 5000.0);
+      REQUIRE(json["root"]["children"].size() == 1);
+      checkImplicitRoot(json["root"]["children"][0], "east", levels, 5, 0.0, zoom0, expected);
       std::set<std::string> read;
       checkTileMaps(decodeHemisphere(files, "east", levels, read), expected);
       CHECK(read == subtreePaths(files));
@@ -456,8 +461,9 @@ TEST_SUITE("tileset") {
     REQUIRE(tileset.root.geometric_error_m < 5000.0);
     const std::vector<ImplicitFile> files = writeImplicitTileset(tileset, 2);
     const nlohmann::json json = tilesetJson(files);
-    checkImplicitRoot(json["root"], "east", 2, 5, 0.0, ancestor, expected);
-    CHECK(json["root"]["boundingVolume"]["region"][4] == -500.0);
+    REQUIRE(json["root"]["children"].size() == 1);
+    checkImplicitRoot(json["root"]["children"][0], "east", 2, 5, 0.0, ancestor, expected);
+    CHECK(json["root"]["children"][0]["boundingVolume"]["region"][4] == -500.0);
     std::set<std::string> read;
     checkTileMaps(decodeHemisphere(files, "east", 2, read), expected);
     CHECK(read == subtreePaths(files));
@@ -477,10 +483,8 @@ TEST_SUITE("tileset") {
       CHECK_FALSE(root.contains("implicitTiling"));
       CHECK_FALSE(root.contains("content"));
       CHECK(root["refine"] == "REPLACE");
-      CHECK(root["geometricError"] == tileset.root.geometric_error_m);
-      CHECK(root["boundingVolume"]["region"] ==
-            nlohmann::json::array({-kPi, -kPi / 2, kPi, kPi / 2, tileset.root.region.min_height_m,
-                                   tileset.root.region.max_height_m}));
+      CHECK(root["geometricError"] == std::max(tileset.geometric_error_m, tileset.root.geometric_error_m));
+      CHECK(root["boundingVolume"]["region"] == regionArray(tileset.root.region));
       REQUIRE(root["children"].size() == 2);
       checkImplicitRoot(root["children"][0], "west", levels, 3, -kPi,
                         expected.at({"west", 0, 0, 0}), expected);

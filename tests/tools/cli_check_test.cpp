@@ -10,6 +10,7 @@
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -109,8 +110,16 @@ TEST_SUITE("check") {
     };
     const nlohmann::json tileset = readJson(dir / "implicit/tileset.json");
     CHECK(tileset["asset"]["version"] == "1.1");
-    const nlohmann::json& root = tileset["root"];
-    REQUIRE(root.contains("implicitTiling"));  // N57E011 lies in the east zoom-0 tile only
+    // The root frames the data (what a viewer zooms to), the implicit root below it is the
+    // east zoom-0 square (N57E011 lies in it only).
+    const nlohmann::json build_facts = readJson(dir / "implicit/build.json");
+    CHECK_FALSE(tileset["root"].contains("implicitTiling"));
+    CHECK(tileset["root"]["boundingVolume"] == build_facts["explicit_tileset"]["root"]["boundingVolume"]);
+    REQUIRE(tileset["root"]["children"].size() == 1);
+    const nlohmann::json& root = tileset["root"]["children"][0];
+    REQUIRE(root.contains("implicitTiling"));
+    CHECK(root["boundingVolume"]["region"][0] == 0.0);
+    CHECK(root["boundingVolume"]["region"][2] == std::numbers::pi);
     CHECK(root["implicitTiling"]["subdivisionScheme"] == "QUADTREE");
     CHECK(root["content"]["uri"] == "tiles/east/{level}/{x}/{y}.glb");
     // Every tile's measured error travels as tile metadata (CesiumJS would halve the root's).
