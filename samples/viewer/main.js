@@ -1,6 +1,6 @@
 // terratiles viewer: loads a 3D Tiles tileset (default /data/tileset.json) into
 // CesiumJS without Cesium ion or any network access, flies to it and shows a
-// per-depth legend.  Automation reads `window.terratiles` (plain data) and may
+// per-zoom legend.  Automation reads `window.terratiles` (plain data) and may
 // call the helpers in `window.terratilesApi`.
 //
 // URL parameters:
@@ -28,11 +28,12 @@
     tilesLoaded: 0, // tileLoad events (content loads, re-loads included)
     tilesUnloaded: 0,
     failedTiles: [], // [{url, message}]
-    tilesByDepth: {}, // depth -> number of distinct tiles whose content loaded
-    renderedByDepth: {}, // depth -> number of distinct tiles rendered at least once
-    visibleByDepth: {}, // depth -> tiles rendered in the last frame
-    geometricErrorByDepth: {}, // depth -> geometric error of a tile seen at that depth
-    maxDepthSeen: -1,
+    // Per level: the zoom of terratiles tiles (from their content names), else tree depth.
+    tilesByLevel: {}, // level -> number of distinct tiles whose content loaded
+    renderedByLevel: {}, // level -> number of distinct tiles rendered at least once
+    visibleByLevel: {}, // level -> tiles rendered in the last frame
+    geometricErrorByLevel: {}, // level -> geometric error of a tile seen at that level
+    maxLevelSeen: -1,
     allTilesLoaded: false, // tileset.tilesLoaded in the last frame
     allTilesLoadedCount: 0, // allTilesLoaded events
     initialTilesLoaded: false,
@@ -51,7 +52,16 @@
   const renderedSets = new Map();
   let frameVisible = {};
 
-  function tileDepth(tile) {
+  // A tile's row in the legend: its zoom, read from a terratiles content name
+  // (tiles/z/x/y.glb, or tiles/west|east/z/x/y.glb with --implicit), else its depth in the
+  // tree (another tileset). null for a tile with nothing to draw (an implicit subtree, an
+  // external tileset): implicit tilesets add such placeholder tiles, so depth is not zoom.
+  const zoomInName = /(?:^|\/)tiles\/(?:(?:west|east)\/)?(\d+)\/\d+\/\d+\.glb(?:$|\?)/;
+  function tileLevel(tile) {
+    const url = (tile.content && tile.content.url) || '';
+    if (/\.(subtree|json)(?:$|\?)/.test(url)) return null;
+    const match = zoomInName.exec(url);
+    if (match) return Number(match[1]);
     let d = 0;
     for (let t = tile.parent; t; t = t.parent) d++;
     return d;
@@ -62,10 +72,10 @@
     s.add(tile);
     return s.size;
   }
-  function noteDepth(tile, depth) {
-    if (depth > status.maxDepthSeen) status.maxDepthSeen = depth;
-    if (!(depth in status.geometricErrorByDepth)) {
-      status.geometricErrorByDepth[depth] = tile.geometricError;
+  function noteLevel(tile, depth) {
+    if (depth > status.maxLevelSeen) status.maxLevelSeen = depth;
+    if (!(depth in status.geometricErrorByLevel)) {
+      status.geometricErrorByLevel[depth] = tile.geometricError;
     }
   }
 
@@ -110,8 +120,8 @@
     if (!force && now - lastLegend < 250) return;
     lastLegend = now;
     const depths = new Set([
-      ...Object.keys(status.tilesByDepth),
-      ...Object.keys(status.renderedByDepth),
+      ...Object.keys(status.tilesByLevel),
+      ...Object.keys(status.renderedByLevel),
     ]);
     const sorted = [...depths].map(Number).sort((a, b) => a - b);
     let state;
@@ -119,12 +129,12 @@
     else if (!status.ready) state = 'loading&hellip;';
     else state = status.allTilesLoaded ? '<span class="ok">all tiles loaded</span>' : 'loading tiles&hellip;';
     let html = `${escapeHtml(tilesetUrl)}<br>${state}<br>`;
-    html += '<table><tr><th>depth</th><th>geom.err</th><th>loaded</th><th>visible</th><th>rendered</th></tr>';
+    html += '<table><tr><th>zoom</th><th>geom.err</th><th>loaded</th><th>visible</th><th>rendered</th></tr>';
     for (const d of sorted) {
       html +=
-        `<tr><td>${d}</td><td>${fmt(status.geometricErrorByDepth[d], 1)}</td>` +
-        `<td>${status.tilesByDepth[d] || 0}</td><td>${status.visibleByDepth[d] || 0}</td>` +
-        `<td>${status.renderedByDepth[d] || 0}</td></tr>`;
+        `<tr><td>${d}</td><td>${fmt(status.geometricErrorByLevel[d], 1)}</td>` +
+        `<td>${status.tilesByLevel[d] || 0}</td><td>${status.visibleByLevel[d] || 0}</td>` +
+        `<td>${status.renderedByLevel[d] || 0}</td></tr>`;
     }
     html += '</table>';
     html += `tiles loaded: ${status.tilesLoaded}, pending: ${status.pendingRequests}, processing: ${status.tilesProcessing}<br>`;
@@ -151,7 +161,7 @@
   });
   scene.postRender.addEventListener(() => {
     status.frame++;
-    status.visibleByDepth = frameVisible;
+    status.visibleByLevel = frameVisible;
     const cam = viewer.camera;
     const carto = cam.positionCartographic;
     status.camera = {
@@ -207,10 +217,11 @@
       });
 
       tileset.tileLoad.addEventListener((tile) => {
-        const d = tileDepth(tile);
-        noteDepth(tile, d);
         status.tilesLoaded++;
-        status.tilesByDepth[d] = addToSet(loadedSets, d, tile);
+        const d = tileLevel(tile);
+        if (d === null) return;
+        noteLevel(tile, d);
+        status.tilesByLevel[d] = addToSet(loadedSets, d, tile);
       });
       tileset.tileUnload.addEventListener(() => {
         status.tilesUnloaded++;
@@ -221,10 +232,11 @@
         updateLegend(true);
       });
       tileset.tileVisible.addEventListener((tile) => {
-        const d = tileDepth(tile);
-        noteDepth(tile, d);
+        const d = tileLevel(tile);
+        if (d === null) return;
+        noteLevel(tile, d);
         frameVisible[d] = (frameVisible[d] || 0) + 1;
-        status.renderedByDepth[d] = addToSet(renderedSets, d, tile);
+        status.renderedByLevel[d] = addToSet(renderedSets, d, tile);
       });
       tileset.loadProgress.addEventListener((pending, processing) => {
         status.pendingRequests = pending;
@@ -311,8 +323,8 @@
     resetCounters() {
       loadedSets.clear();
       renderedSets.clear();
-      status.tilesByDepth = {};
-      status.renderedByDepth = {};
+      status.tilesByLevel = {};
+      status.renderedByLevel = {};
     },
   };
 

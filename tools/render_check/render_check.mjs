@@ -183,6 +183,12 @@ function analyseTileset(tilesetFile) {
     centre = { lon: lonC, lat: (reg[1] + reg[3]) / 2 };
   }
   const visitedJson = new Set([path.resolve(tilesetFile)]);
+  const buildFile = path.join(path.dirname(tilesetFile), 'build.json');
+  let implicitAsExplicit = null;
+  if (fs.existsSync(buildFile)) {
+    const facts = readJson(buildFile);
+    if (facts.explicit_tileset && facts.explicit_tileset.root) implicitAsExplicit = facts.explicit_tileset.root;
+  }
 
   function inRegion(tile) {
     const r = tile.boundingVolume && tile.boundingVolume.region;
@@ -191,9 +197,24 @@ function analyseTileset(tilesetFile) {
     return lonIn && centre.lat >= r[1] && centre.lat <= r[3];
   }
 
-  function walk(tile, depth, baseDir, onCentrePath) {
+  // Levels as the viewer counts them: the zoom in a terratiles content name, else the depth.
+  const zoomInName = /(?:^|\/)tiles\/(?:(?:west|east)\/)?(\d+)\/\d+\/\d+\.glb$/;
+  function walk(tile, treeDepth, baseDir, onCentrePath) {
     tileCount++;
-    const d = (depths[depth] ||= { tiles: 0, contentTiles: 0, geometricErrorMin: Infinity, geometricErrorMax: -Infinity });
+    const named = contentUris(tile).map((u) => zoomInName.exec(u)).find((m) => m);
+    const depth = named ? Number(named[1]) : treeDepth;
+    if (tile.implicitTiling && implicitAsExplicit) {
+      // A terratiles implicit output: build.json holds the same tree explicitly (same
+      // contents, errors and regions); walk that instead of the subtree files.
+      const root = implicitAsExplicit;
+      implicitAsExplicit = null;
+      walk(root, treeDepth, baseDir, onCentrePath);
+      return;
+    }
+    // Tiles without content draw nothing: they get no level of their own.
+    const d = contentUris(tile).length
+      ? (depths[depth] ||= { tiles: 0, contentTiles: 0, geometricErrorMin: Infinity, geometricErrorMax: -Infinity })
+      : { tiles: 0, contentTiles: 0, geometricErrorMin: Infinity, geometricErrorMax: -Infinity };
     d.tiles++;
     if (Number.isFinite(tile.geometricError)) {
       d.geometricErrorMin = Math.min(d.geometricErrorMin, tile.geometricError);
@@ -227,7 +248,7 @@ function analyseTileset(tilesetFile) {
       const r = tile.boundingVolume.region;
       centreChain[depth] = { geometricError: tile.geometricError, regionTop: r[5], regionBottom: r[4] };
     }
-    for (const child of tile.children || []) walk(child, depth + 1, baseDir, here);
+    for (const child of tile.children || []) walk(child, treeDepth + 1, baseDir, here);
     for (const ext of externals) {
       if (visitedJson.has(ext)) {
         notes.push(`external tileset cycle at ${ext}`);
@@ -235,7 +256,7 @@ function analyseTileset(tilesetFile) {
       }
       visitedJson.add(ext);
       const sub = readJson(ext);
-      if (sub.root) walk(sub.root, depth + 1, path.dirname(ext), here);
+      if (sub.root) walk(sub.root, treeDepth + 1, path.dirname(ext), here);
     }
   }
   walk(root.root, 0, path.dirname(tilesetFile), true);
@@ -329,7 +350,7 @@ async function main() {
     centerLonLatDeg: stat.centre ? [stat.centre.lon, stat.centre.lat] : null,
     region: stat.region,
     surfaceHeightAtCenter_m: null,
-    tilesByDepth: {},
+    tilesByLevel: {},
     failedTiles: [],
     consoleErrors: [],
     httpErrors: [],
@@ -349,6 +370,7 @@ async function main() {
 
   let server = null;
   let context = null;
+  let stLast = {}; // the viewer status last read
   const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), 'tt-render-check-'));
   const timeoutMs = opts.timeoutS * 1000;
   try {
@@ -415,19 +437,20 @@ async function main() {
     }
     result.seconds.initialLoad = (Date.now() - tLoad) / 1000;
     let st = await page.evaluate(() => window.terratiles);
+    stLast = st;
     if (st.error) result.reasons.push(`tileset failed to load: ${st.error}`);
     if (st.renderError) result.reasons.push(`render error: ${st.renderError}`);
     result.boundingSphere = st.boundingSphere;
     log(
       `initial view: ${st.ready ? 'loaded' : 'NOT loaded'} after ${result.seconds.initialLoad.toFixed(1)} s, ` +
-        `rendered per depth ${JSON.stringify(st.renderedByDepth)}`,
+        `rendered per level (zoom) ${JSON.stringify(st.renderedByLevel)}`,
     );
     result.initialView = {
       ready: st.ready,
-      visibleByDepth: st.visibleByDepth,
+      visibleByLevel: st.visibleByLevel,
       cameraHeight_m: st.camera && st.camera.height,
     };
-    if (st.ready && !Object.values(st.visibleByDepth).some((n) => n > 0)) {
+    if (st.ready && !Object.values(st.visibleByLevel).some((n) => n > 0)) {
       // The overview shows the whole bounding sphere; CesiumJS draws nothing when
       // the tileset-level geometricError gives a screen-space error below the limit.
       result.reasons.push(
@@ -491,18 +514,18 @@ async function main() {
           cameraHeight_m: st.camera ? Math.round(st.camera.height) : null,
           settled,
           seconds: (Date.now() - ts) / 1000,
-          visibleByDepth: st.visibleByDepth,
+          visibleByLevel: st.visibleByLevel,
         };
         result.steps.push(rec);
         log(
           `zoom step ${step.depth === null ? '(sweep)' : `depth ${step.depth}`}: camera ${rec.cameraHeight_m} m, ` +
-            `${settled ? 'settled' : 'NOT settled'} in ${rec.seconds.toFixed(1)} s, visible ${JSON.stringify(st.visibleByDepth)}`,
+            `${settled ? 'settled' : 'NOT settled'} in ${rec.seconds.toFixed(1)} s, visible ${JSON.stringify(st.visibleByLevel)}`,
         );
       };
       for (const step of plan) await runStep(step);
       // Fallback: a plain geometric sweep when some depth has still not been drawn
       // (e.g. the centre falls into a gap of an irregular tree).
-      const unrendered = () => expectedDepths.filter((d) => !(st.renderedByDepth[d] > 0));
+      const unrendered = () => expectedDepths.filter((d) => !(st.renderedByLevel[d] > 0));
       const errors = Object.values(stat.depths)
         .flatMap((d) => [d.geometricErrorMin, d.geometricErrorMax])
         .filter((g) => g > 0);
@@ -569,21 +592,22 @@ async function main() {
     }
 
     // --- collect -----------------------------------------------------------
+    stLast = st;
     result.failedTiles = st.failedTiles;
     result.tilesLoadedEvents = st.tilesLoaded;
     if (st.renderError) result.reasons.push(`render error: ${st.renderError}`);
     const allDepths = new Set([
       ...Object.keys(stat.depths),
-      ...Object.keys(st.tilesByDepth),
-      ...Object.keys(st.renderedByDepth),
+      ...Object.keys(st.tilesByLevel),
+      ...Object.keys(st.renderedByLevel),
     ]);
     for (const d of [...allDepths].map(Number).sort((a, b) => a - b)) {
       const s = stat.depths[d] || {};
-      result.tilesByDepth[d] = {
+      result.tilesByLevel[d] = {
         inTileset: s.contentTiles ?? 0,
-        loaded: st.tilesByDepth[d] || 0,
-        rendered: st.renderedByDepth[d] || 0,
-        geometricError: s.geometricErrorMax ?? st.geometricErrorByDepth[d] ?? null,
+        loaded: st.tilesByLevel[d] || 0,
+        rendered: st.renderedByLevel[d] || 0,
+        geometricError: s.geometricErrorMax ?? st.geometricErrorByLevel[d] ?? null,
       };
     }
   } catch (e) {
@@ -602,8 +626,18 @@ async function main() {
   if (stat.glbErrors.length) R.push(`${stat.glbErrors.length} invalid GLB file(s)`);
   const dataHttpErrors = result.httpErrors.filter((h) => /\/data\//.test(h.url));
   if (dataHttpErrors.length) R.push(`${dataHttpErrors.length} failed request(s) under /data/`);
-  const notRendered = expectedDepths.filter((d) => !(result.tilesByDepth[d] && result.tilesByDepth[d].rendered > 0));
-  if (notRendered.length) R.push(`no tile rendered at depth(s) ${notRendered.join(',')}`);
+  const notRendered = expectedDepths.filter((d) => !(result.tilesByLevel[d] && result.tilesByLevel[d].rendered > 0));
+  if (notRendered.length) R.push(`no tile rendered at level(s) ${notRendered.join(',')}`);
+  // The geometricError CesiumJS gave a loaded tile must be one the tileset holds at that level
+  // (implicit tiling: from the tile metadata, not the root's error halved per level).
+  for (const [level, used] of Object.entries(stLast.geometricErrorByLevel || {})) {
+    const s = stat.depths[level];
+    if (!s || s.geometricErrorMin === null) continue;
+    const slack = 1e-9 * Math.max(1, Math.abs(used));
+    if (used < s.geometricErrorMin - slack || used > s.geometricErrorMax + slack) {
+      R.push(`level ${level}: CesiumJS used geometricError ${used}, the tileset has ${s.geometricErrorMin}..${s.geometricErrorMax}`);
+    }
+  }
   if (opts.expectLon !== null && result.centerLonLatDeg) {
     const [lon, lat] = result.centerLonLatDeg;
     const dLon = Math.abs(((lon - opts.expectLon + 540) % 360) - 180);
