@@ -321,8 +321,19 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
 // a viewer may draw side by side: an outline vertex of one that lies on an outline edge of
 // the other (within `tolerance_px`) must be a vertex of it, at the same decoded position
 // (within `same_position_m`). Returns the outline vertices that are not.
+// The polar caps a geographic DEM's check leaves out (see CheckReport::polar_cap_deg), on
+// the grid: rows poleward of cap_deg.
+struct PolarCaps {
+  const DemGrid* dem = nullptr;
+  double cap_deg = 90;
+  bool contain(const std::array<double, 2>& grid_point) const {
+    return cap_deg < 90 && std::fabs(dem->pixelCentre(grid_point[0], grid_point[1]).y) >= cap_deg;
+  }
+};
+
 std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, double tolerance_px,
-                                  double same_position_m) {
+                                  double same_position_m, const PolarCaps& caps,
+                                  std::array<double, 2>* first_missing = nullptr) {
   // The other tile's outline edges by 8-pixel cell.
   constexpr double kCell = 8;
   std::map<std::pair<std::int64_t, std::int64_t>, std::vector<std::size_t>> cells;
@@ -341,6 +352,7 @@ std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, do
   std::size_t missing = 0;
   for (const std::uint32_t v : from.boundary_vertices) {
     const auto& p = from.vertex_grid[v];
+    if (caps.contain(p)) continue;
     const auto found = cells.find({static_cast<std::int64_t>(std::floor(p[0] / kCell)),
                                    static_cast<std::int64_t>(std::floor(p[1] / kCell))});
     if (found == cells.end()) continue;
@@ -360,7 +372,7 @@ std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, do
         if (std::hypot(q[0] - w[0], q[1] - w[1], q[2] - w[2]) <= same_position_m) matched = true;
       }
     }
-    if (on_edge && !matched) ++missing;
+    if (on_edge && !matched && missing++ == 0 && first_missing) *first_missing = p;
   }
   return missing;
 }
@@ -622,6 +634,10 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     }
     std::vector<std::size_t> missing(pairs.size(), 0);
     std::vector<SharedVertexGaps> gaps(pairs.size());
+    std::vector<std::array<double, 2>> first_missing(pairs.size());
+    // Like coverage, leave out the polar caps where triangles at a pole could not be put
+    // back on the grid (their outlines there are the check's cut, not the tiles').
+    const PolarCaps caps{&dem, report.polar_cap_deg};
     tbb::parallel_for(std::size_t{0}, pairs.size(), [&](std::size_t k) {
       const CheckTile& a = tiles[static_cast<std::size_t>(pairs[k][0])];
       const CheckTile& b = tiles[static_cast<std::size_t>(pairs[k][1])];
@@ -637,8 +653,8 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
         // up to 0.87 step each, so an exact T-junction may read up to 1.7 steps off and a lattice
         // point passing an edge within a step reads as one: the figure is exact to a step.
         const double tolerance_px = step / std::max(metres_per_pixel[0], metres_per_pixel[1]);
-        missing[k] = missingBorderVertices(a, b, tolerance_px, allowed_m) +
-                     missingBorderVertices(b, a, tolerance_px, allowed_m);
+        missing[k] = missingBorderVertices(a, b, tolerance_px, allowed_m, caps, &first_missing[k]);
+        missing[k] += missingBorderVertices(b, a, tolerance_px, allowed_m, caps, missing[k] ? nullptr : &first_missing[k]);
       }
     });
     for (std::size_t k = 0; k < pairs.size(); ++k) {
@@ -648,7 +664,8 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
       report.missing_border_vertices += missing[k];
       if (missing[k] > 0) {
         problem("tiles " + keyText(a.key) + " and " + keyText(b.key) + ": " + std::to_string(missing[k]) +
-                " outline vertices of one lie on an outline edge of the other without a vertex there");
+                " outline vertices of one lie on an outline edge of the other without a vertex there (first at pixel " +
+                std::to_string(first_missing[k][0]) + ", " + std::to_string(first_missing[k][1]) + ")");
       }
       report.shared_border_vertices += gaps[k].shared;
       report.shared_vertex_gaps += gaps[k].too_far;

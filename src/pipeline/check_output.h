@@ -42,7 +42,8 @@ struct CheckReport {
   std::size_t zooms = 0;
   std::size_t footprint_pixels = 0;
   // A geographic DEM with rows at a pole: triangles with a vertex there are left out (no
-  // decoding gives its longitude back), with the caps beyond this |latitude|; 90: none.
+  // decoding gives its longitude back), with the caps beyond this |latitude| (coverage and
+  // vertex correspondence both); 90: none.
   double polar_cap_deg = 90;
   std::size_t cuts = 0;                   // balanced cuts checked (random + one per zoom)
   std::size_t cuts_with_holes = 0;
