@@ -1,5 +1,7 @@
 #include "src/base/progress.h"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <csignal>
 
@@ -28,6 +30,12 @@ std::string jsonEscape(const std::string& text) {
 }
 
 }  // namespace
+
+std::uint64_t peakResidentBytes() {
+  rusage usage{};
+  if (getrusage(RUSAGE_SELF, &usage) != 0) return 0;
+  return static_cast<std::uint64_t>(usage.ru_maxrss) * 1024;  // Linux: kilobytes
+}
 
 Progress::Progress(ProgressMode mode, std::FILE* stream) : mode_(mode), stream_(stream) {}
 
@@ -88,9 +96,11 @@ void Progress::endStage() {
   in_stage_ = false;
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - stage_start_).count();
+  stages_.push_back({stage_, seconds, peakResidentBytes()});
   if (mode_ == ProgressMode::Json) {
-    std::fprintf(stream_, "{\"event\":\"stage_done\",\"stage\":\"%s\",\"seconds\":%.3f}\n",
-                 jsonEscape(stage_).c_str(), seconds);
+    std::fprintf(stream_,
+                 "{\"event\":\"stage_done\",\"stage\":\"%s\",\"seconds\":%.3f,\"peak_rss_bytes\":%llu}\n",
+                 jsonEscape(stage_).c_str(), seconds, static_cast<unsigned long long>(stages_.back().peak_rss_bytes));
     std::fflush(stream_);
   } else if (mode_ == ProgressMode::Bar) {
     done_ = total_;

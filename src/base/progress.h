@@ -11,10 +11,22 @@
 #include <cstdint>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 namespace terratiles {
 
 enum class ProgressMode { Quiet, Bar, Json };
+
+// A finished stage, for reports: its wall time and the process's peak resident memory when
+// it ended (the peak so far, so a stage's own need is at most its figure).
+struct StageRecord {
+  std::string name;
+  double seconds = 0;
+  std::uint64_t peak_rss_bytes = 0;
+};
+
+// The process's peak resident set size so far (getrusage), in bytes.
+std::uint64_t peakResidentBytes();
 
 class Progress {
  public:
@@ -37,6 +49,9 @@ class Progress {
   static void resetCancel();
   void throwIfCancelled() const;
 
+  // Every stage ended so far, in order (in every mode).
+  const std::vector<StageRecord>& stages() const { return stages_; }
+
  private:
   void draw(bool final_line);
 
@@ -49,6 +64,7 @@ class Progress {
   bool in_stage_ = false;
   std::chrono::steady_clock::time_point stage_start_;
   std::chrono::steady_clock::time_point last_draw_;
+  std::vector<StageRecord> stages_;
 };
 
 }  // namespace terratiles

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <numbers>
 #include <optional>
 
@@ -23,6 +24,9 @@
 #include "src/geo/place_on_globe.h"
 #include "formats/vector/read_break_lines.h"
 #include "src/lod/build_levels.h"
+#include "src/pipeline/build_report.h"
+#include "src/pipeline/report_html.h"
+#include "src/pipeline/report_maps.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"
@@ -262,6 +266,9 @@ struct ZoomContent {
   std::int32_t step = 0;      // grid: pixels between samples
   std::size_t clusters = 0;   // clusters: the level's own clusters
   const TinMesh* mesh = nullptr;
+  // For the report's map: the clusters its tiles are made of (the finer level's, carried
+  // over; on the finest level its own); nullptr for the grid pyramid.
+  const FacePartition* map_clusters = nullptr;
   std::vector<PyramidTile> tiles;
   double max_error_m = 0;
   double rms_error_m = 0;
@@ -387,6 +394,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   std::vector<ZoomContent> zooms;
   GridPyramid pyramid;               // grid: owns the meshes
   std::vector<Level> levels;         // clusters: owns the meshes
+  std::unique_ptr<TileFrame> frame;  // clusters: the tile scheme over the DEM
   if (options.lod == LodMethod::Grid) {
     GridPyramidOptions pyramid_options;
     pyramid_options.tile_cells = options.tile_cells;
@@ -398,14 +406,14 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
                                         "block of valid (not nodata) pixels");
     }
     for (PyramidLevel& level : pyramid.levels) {
-      zooms.push_back({level.zoom, level.step, 0, &level.mesh, std::move(level.tiles), level.max_error_m,
+      zooms.push_back({level.zoom, level.step, 0, &level.mesh, nullptr, std::move(level.tiles), level.max_error_m,
                        level.rms_error_m});
     }
   } else {
     ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress);
-    const TileFrame frame(options.scheme, dem);
+    frame = std::make_unique<TileFrame>(options.scheme, dem);
     const ZoomPlan plan =
-        planZooms(frame, finest.mesh, options.tile_triangles, options.max_zoom, options.clusters_per_tile);
+        planZooms(*frame, finest.mesh, options.tile_triangles, options.max_zoom, options.clusters_per_tile);
     progress.note("zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) + " (" +
                   std::string(tileSchemeName(options.scheme)) + "), clusters assigned by " +
                   std::string(assignmentName(options.assignment)));
@@ -419,7 +427,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     if (options.assignment == Assignment::Merge && options.join_tile_clusters) {
       // Level l's clusters are inherited at zoom max_zoom - l - 1: join those that merge puts
       // in the same tiles, so only borders that some tile outline follows stay locked.
-      level_options.regroup_clusters = joinTileClusters(frame, plan.max_zoom);
+      level_options.regroup_clusters = joinTileClusters(*frame, plan.max_zoom);
     }
     if (plan.max_zoom > plan.min_zoom) {
       level_options.coarser_levels = plan.max_zoom - plan.min_zoom;
@@ -438,9 +446,12 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.zoom = zoom;
       content.clusters = static_cast<std::size_t>(levels[l].partition.cluster_count);
       content.mesh = &levels[l].mesh;
+      content.map_clusters = !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
+                             : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
+                                                                                  : nullptr;
       content.max_error_m = levels[l].error.max_error_m;
       content.rms_error_m = levels[l].error.rms_error_m;
-      for (TileFaces& tile : assignClusters(frame, levels[l], zoom, options.assignment, finer_cluster_tiles,
+      for (TileFaces& tile : assignClusters(*frame, levels[l], zoom, options.assignment, finer_cluster_tiles,
                                             own_cluster_tiles)) {
         PyramidTile pyramid_tile;
         pyramid_tile.key = tile.key;
@@ -463,6 +474,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   glb.normal_bits = options.draco_normal_bits;
   glb.encoding_speed = options.draco_speed;
   glb.generator = std::string("terratiles ") + kVersion;
+  summary.generator = glb.generator;
   // The shared quantisation grid: --position-step, or the step at which the finest zoom's
   // widest tile takes --draco-position-bits.
   double base_step_m = options.position_step_m;
@@ -524,6 +536,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     summary.tiles += zoom_summary.tiles;
     summary.triangles += zoom_summary.triangles;
     summary.bytes += zoom_summary.bytes;
+    summary.tile_bytes += zoom_summary.bytes;
     if (level.zoom < max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, level.max_error_m);
     summary.zooms.push_back(zoom_summary);
   }
@@ -605,6 +618,31 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     }
   } else {
     summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
+  }
+  progress.throwIfCancelled();
+
+  // The report: maps per zoom, the check of what was written, then report.json and .html.
+  if (options.report) {
+    std::vector<ZoomMaps> maps;
+    progress.beginStage("drawing report maps", zooms.size());
+    for (const ZoomContent& level : zooms) {
+      maps.push_back(drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, level.max_error_m));
+      progress.advance();
+    }
+    progress.endStage();
+    std::optional<CheckReport> check;
+    if (options.report_check_cuts > 0) {
+      CheckOptions check_options;
+      check_options.cuts = static_cast<std::size_t>(options.report_check_cuts);
+      check = checkOutput(output.staging().string(), check_options, progress);
+      summary.check_ran = true;
+      summary.check_ok = check->ok();
+    }
+    summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const nlohmann::json report = buildReportJson(options, summary, progress.stages(), check, maps);
+    summary.bytes += output.writeFile("report.json", report.dump(1) + "\n");
+    summary.bytes += output.writeFile("report.html", renderReportHtml(report));
+    summary.report_path = (std::filesystem::path(options.output_dir) / "report.html").string();
   }
   progress.throwIfCancelled();
   output.commit();

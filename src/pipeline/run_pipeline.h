@@ -52,6 +52,10 @@ struct BuildOptions {
   // measured error and region as tile metadata) instead of an explicit tree.
   bool implicit_tiling = false;
   std::int32_t subtree_levels = 6;
+  // The build report (report.json, report.html): `terratiles check` with this many random
+  // cuts runs on the output before it is moved into place (0: no check in the report).
+  bool report = true;
+  std::int32_t report_check_cuts = 200;
   // The Draco quantisation grid every tile shares (a power of two in metres): 1/128 m, or
   // (draco_position_bits > 0) the step at which the finest zoom's widest tile takes that
   // many bits. A zoom whose tiles are too wide for 2^23 steps uses a power-of-two multiple.
@@ -79,6 +83,10 @@ struct ZoomSummary {
 
 struct BuildSummary {
   std::string output_dir;
+  std::string generator;    // "terratiles <version>"
+  std::string report_path;  // OUTDIR/report.html, or empty
+  bool check_ran = false;
+  bool check_ok = false;
   std::string crs_name;
   std::int32_t width = 0;
   std::int32_t height = 0;
@@ -94,7 +102,8 @@ struct BuildSummary {
   std::vector<ZoomSummary> zooms;
   std::size_t tiles = 0;
   std::size_t triangles = 0;
-  std::size_t bytes = 0;
+  std::size_t bytes = 0;       // every file written
+  std::size_t tile_bytes = 0;  // the GLB tiles only
   double worst_error_m = 0;  // over the non-leaf zooms (the leaves hold the DEM itself)
   double position_step_m = 0;  // the base quantisation grid (the finest zooms')
   double seconds = 0;

@@ -11,6 +11,9 @@
 #                  1348.0 m at weights from pixel position (174.59, 119.56) gives 1359.1 m
 #                  LN02, plus the CHGeo2004 undulation there, 50.54 m: 1409.6 m above the
 #                  WGS84 ellipsoid.
+#   report         the Interlaken build's report.html (tools/render_check/report_check.mjs):
+#                  no request leaves the page, no console error, the plots and both maps per
+#                  zoom are there and decode; a full-page screenshot.
 #   srtm_implicit  SRTM N57E011, geographic, --implicit: CesiumJS must expand the subtrees
 #                  and take every tile's measured error from the tile metadata (without it,
 #                  it halves the root's error per level); the explicit root frames the data,
@@ -30,13 +33,20 @@ case "$case_name" in
     expectations=(--expect-lon 7.872 --expect-lat 46.707 --expect-height 1409.6 --height-tolerance 5
                   --screenshot-close "$artifacts/interlaken_close.png")
     ;;
+  report)
+    "$terratiles" build "$data_dir/ch_dhm25_interlaken_25m_2056.tif" -o "$work/out" -q \
+      --geoid "$data_dir/geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif"
+    node "$source_dir/tools/render_check/report_check.mjs" "$work/out" \
+      --screenshot "$artifacts/interlaken_report.png"
+    exit 0
+    ;;
   srtm_implicit)
     "$terratiles" build "$data_dir/srtm3_N57E011_4326.tif" -o "$work/out" -q \
       --scheme geographic --implicit --tin-max-error 2
     expectations=(--expect-lon 11.5 --expect-lat 57.5)
     ;;
   *)
-    echo "render_output.sh: unknown case '$case_name'; expected interlaken or srtm_implicit" >&2
+    echo "render_output.sh: unknown case '$case_name'; expected interlaken, report or srtm_implicit" >&2
     exit 2
     ;;
 esac

@@ -27,6 +27,7 @@
 #include "formats/output_directory.h"
 #include "formats/tin/tin_file.h"
 #include "formats/vector/read_break_lines.h"
+#include "src/pipeline/build_report.h"
 #include "src/pipeline/check_output.h"
 #include "src/lod/build_levels.h"
 #include "src/tin/build_tin.h"
@@ -66,6 +67,22 @@ std::string humanBytes(std::size_t bytes) {
   return text.str();
 }
 
+// The summary as one JSON line (--progress json): the last line a machine reads.
+void printJsonSummary(const BuildSummary& s, std::ostream& err) {
+  nlohmann::json j;
+  j["event"] = "summary";
+  j["tileset"] = s.output_dir + "/tileset.json";
+  j["report"] = s.report_path;
+  j["tiles"] = s.tiles;
+  j["triangles"] = s.triangles;
+  j["bytes"] = s.tile_bytes;        // the tiles
+  j["bytes_written"] = s.bytes;     // every file, reports included
+  j["worst_error_m"] = s.worst_error_m;
+  j["seconds"] = s.seconds;
+  j["check"] = s.check_ran ? (s.check_ok ? "ok" : "failed") : "not run";
+  err << j.dump() << "\n" << std::flush;
+}
+
 void printSummary(const BuildSummary& s, std::ostream& err) {
   std::ostringstream text;
   text.imbue(std::locale::classic());
@@ -91,11 +108,16 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
          << z.rms_error_m << std::setw(13) << z.geometric_error_m << "\n";
   }
   text << "  total " << s.tiles << " tiles, " << s.triangles << " triangles, "
-       << humanBytes(s.bytes) << " (" << std::setprecision(2)
-       << (tile_triangles ? static_cast<double>(s.bytes) / static_cast<double>(tile_triangles) : 0.0)
+       << humanBytes(s.tile_bytes) << " of tiles (" << std::setprecision(2)
+       << (tile_triangles ? static_cast<double>(s.tile_bytes) / static_cast<double>(tile_triangles) : 0.0)
        << " B per tile triangle, finest step " << std::setprecision(1) << s.position_step_m * 1000
        << " mm), worst measured error " << std::setprecision(2)
        << s.worst_error_m << " m, " << s.seconds << " s\n";
+  if (s.check_ran) {
+    text << "  check    " << (s.check_ok ? "ok: seamless and honest errors" : "FAILED: see the report's check section")
+         << "\n";
+  }
+  if (!s.report_path.empty()) text << "  report   " << s.report_path << "\n";
   text << "  view it: node samples/viewer/serve.mjs " << s.output_dir
        << "  (then open the printed URL; see README)\n";
   err << text.str() << std::flush;
@@ -417,6 +439,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                           "content availability, each tile's measured error and region as tile metadata)");
   build_command->add_option("--subtree-levels", build.subtree_levels, "--implicit: tree levels per subtree file")
       ->capture_default_str();
+  build_command->add_flag("--no-report", [&build](std::int64_t) { build.report = false; },
+                          "Write no report.json / report.html");
+  build_command
+      ->add_option("--report-check-cuts", build.report_check_cuts,
+                   "Random cuts `terratiles check` tries for the report (0: no check in the report)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   build_command->add_flag("--no-draco", [&build](std::int64_t) { build.draco = false; },
                           "Write plain GLB without KHR_draco_mesh_compression");
   CLI::Option* position_step =
@@ -545,6 +574,18 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   check_command->add_option("--seed", check_options.seed, "Seed of the random cuts")->capture_default_str();
   addProgressOptions(*check_command, quiet, progress_choice);
 
+  std::string report_dir;
+  ReportOptions report_options;
+  CLI::App* report_command = app.add_subcommand(
+      "report", "Regenerate OUTDIR/report.json and report.html from an existing output (re-running the check); "
+                "an output from before reports existed gets what its files tell");
+  report_command->footer(kExitCodes);
+  report_command->add_option("OUTDIR", report_dir, "A directory written by terratiles build")->required();
+  report_command
+      ->add_option("--cuts", report_options.check_cuts, "Random cuts for the check (0: keep the recorded check)")
+      ->capture_default_str();
+  addProgressOptions(*report_command, quiet, progress_choice);
+
   try {
     std::vector<const char*> argv;
     for (const auto& arg : args) argv.push_back(arg.c_str());
@@ -572,6 +613,20 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     const CheckReport report = checkOutput(check_dir, check_options, progress);
     out << describeCheck(report) << std::flush;
     return report.ok() ? 0 : kCheckFailedExitCode;
+  }
+  if (report_command->parsed()) {
+    Progress progress(progressModeFor(progress_choice, quiet));
+    InterruptGuard interrupt_guard;
+    const RegeneratedReport report = regenerateReport(report_dir, report_options, progress);
+    if (!quiet) {
+      err << "terratiles: report " << report.html_path << " ("
+          << (report.from_build_record ? "from the build's report.json"
+                                       : "rebuilt from the files: no cluster maps or stage times, which only the "
+                                         "build records")
+          << "; check " << (report.report["check"].is_null() ? "not run" : report.report["check"].value("ok", false) ? "ok" : "FAILED")
+          << ")\n";
+    }
+    return 0;
   }
   if (levels_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
@@ -603,7 +658,11 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
     const BuildSummary summary = runPipeline(build, progress);
-    if (!quiet) printSummary(summary, err);
+    if (!quiet && progress_choice == "json") {
+      printJsonSummary(summary, err);
+    } else if (!quiet) {
+      printSummary(summary, err);
+    }
   }
   return 0;
 }
