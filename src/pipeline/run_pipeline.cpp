@@ -630,6 +630,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       progress.advance();
     }
     progress.endStage();
+    // The levels are written and drawn: free them before the check decodes every tile.
+    zooms = {};
+    levels = {};
+    pyramid = {};
     std::optional<CheckReport> check;
     if (options.report_check_cuts > 0) {
       CheckOptions check_options;
