@@ -295,7 +295,11 @@ RegeneratedReport regenerateReport(const std::string& output_dir, const ReportOp
   const fs::path dir(output_dir);
   RegeneratedReport result;
   if (fs::exists(dir / "report.json")) {
-    result.report = readJsonFile(dir / "report.json");
+    try {
+      result.report = readJsonFile(dir / "report.json");
+    } catch (const Error& e) {
+      throw Error(ErrorCode::Input, std::string(e.what()) + "; delete it to rebuild the report from the output's files");
+    }
     if (result.report.value("schema", std::string()) != kReportSchema) {
       throw Error(ErrorCode::Input, (dir / "report.json").string() + " has schema '" +
                                         result.report.value("schema", std::string("none")) + "'; expected " +

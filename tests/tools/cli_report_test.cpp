@@ -226,6 +226,17 @@ TEST_SUITE("report") {
     CHECK(again.err.find("from the build's report.json") != std::string::npos);
     CHECK(readText(fs::path(il) / "report.html") == first);
 
+    // A damaged report.json: refused with the way out, and nothing half-written.
+    {
+      std::ofstream damaged(fs::path(il) / "report.json");
+      damaged << "{broken";
+    }
+    const auto damaged = test::runTerratiles({"report", il, "--cuts", "0"});
+    CHECK(damaged.exit_code == 3);
+    CHECK(damaged.err.find("not valid JSON") != std::string::npos);
+    CHECK(damaged.err.find("delete it") != std::string::npos);
+    CHECK(readText(fs::path(il) / "report.html") == first);
+
     // Without build.json the source DEM is unknown: a clear refusal, exit 3.
     fs::remove(fs::path(out) / "build.json");
     fs::remove(fs::path(out) / "report.json");
