@@ -29,6 +29,6 @@ output="$root/out/sample"
 build/terratiles build "$sample" -o "$output" --force
 cat <<MSG
 
-The tileset is $output/tileset.json
-View it in CesiumJS:  node samples/viewer/serve.mjs $output   (then open the printed URL)
+The tileset is $output/tileset.json, the build report $output/report.html
+View it in CesiumJS:  build/terratiles serve $output   (then open the printed URL)
 MSG

@@ -7,6 +7,9 @@
 #include <tbb/global_control.h>
 #include <algorithm>
 #include <csignal>
+#include <cstring>
+#include <cstdlib>
+#include <cerrno>
 #include <cstdio>
 #include <charconv>
 #include <chrono>
@@ -67,6 +70,40 @@ std::string humanBytes(std::size_t bytes) {
   return text.str();
 }
 
+// `terratiles serve`: runs samples/viewer/serve.mjs on OUTDIR through node, in place of this
+// process (it prints the URL and serves until interrupted). Everything it needs is checked
+// first, each with its fix.
+[[noreturn]] void serveOutput(const std::string& output_dir, int port) {
+  namespace fs = std::filesystem;
+  if (!fs::exists(fs::path(output_dir) / "tileset.json")) {
+    throw Error(ErrorCode::Input, output_dir + " has no tileset.json; expected an output of terratiles build");
+  }
+  const char* override_dir = std::getenv("TERRATILES_VIEWER_DIR");
+  const fs::path viewer = override_dir && *override_dir ? fs::path(override_dir) : fs::path(kViewerDir);
+  if (!fs::exists(viewer / "serve.mjs")) {
+    throw Error(ErrorCode::Input, "the viewer is not at " + viewer.string() +
+                                      " (no serve.mjs); set TERRATILES_VIEWER_DIR to a samples/viewer directory");
+  }
+  if (!fs::exists(viewer / "node_modules/cesium/Build/Cesium/Cesium.js")) {
+    throw Error(ErrorCode::Input, "the viewer at " + viewer.string() + " has no CesiumJS installed; run (cd " +
+                                      viewer.string() + " && npm ci)");
+  }
+  std::string node;
+  const char* path_variable = std::getenv("PATH");
+  std::istringstream path_list(path_variable ? path_variable : "");
+  for (std::string entry; node.empty() && std::getline(path_list, entry, ':');) {
+    if (!entry.empty() && access((fs::path(entry) / "node").c_str(), X_OK) == 0) node = (fs::path(entry) / "node").string();
+  }
+  if (node.empty()) throw Error(ErrorCode::Input, "node (Node.js) is not on PATH; install it (apt-get install nodejs)");
+  std::vector<std::string> args{node, (viewer / "serve.mjs").string(), output_dir, "--port", std::to_string(port)};
+  std::vector<char*> argv;
+  for (std::string& arg : args) argv.push_back(arg.data());
+  argv.push_back(nullptr);
+  std::fflush(nullptr);
+  execv(node.c_str(), argv.data());
+  throw Error(ErrorCode::Internal, "could not start " + node + ": " + std::strerror(errno));
+}
+
 // The summary as one JSON line (--progress json): the last line a machine reads.
 void printJsonSummary(const BuildSummary& s, std::ostream& err) {
   nlohmann::json j;
@@ -118,8 +155,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
          << "\n";
   }
   if (!s.report_path.empty()) text << "  report   " << s.report_path << "\n";
-  text << "  view it: node samples/viewer/serve.mjs " << s.output_dir
-       << "  (then open the printed URL; see README)\n";
+  text << "  view it: terratiles serve " << s.output_dir << "  (then open the printed URL)\n";
   err << text.str() << std::flush;
 }
 
@@ -574,6 +610,17 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   check_command->add_option("--seed", check_options.seed, "Seed of the random cuts")->capture_default_str();
   addProgressOptions(*check_command, quiet, progress_choice);
 
+  std::string serve_dir;
+  int serve_port = 8080;
+  CLI::App* serve_command = app.add_subcommand(
+      "serve", "View OUTDIR in the CesiumJS viewer (samples/viewer): serves it on 127.0.0.1 and prints the URL "
+               "(needs node and the viewer's npm packages)");
+  serve_command->footer(kExitCodes);
+  serve_command->add_option("OUTDIR", serve_dir, "A directory written by terratiles build")->required();
+  serve_command->add_option("--port", serve_port, "Port (0: any free port)")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+
   std::string report_dir;
   ReportOptions report_options;
   CLI::App* report_command = app.add_subcommand(
@@ -614,6 +661,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     out << describeCheck(report) << std::flush;
     return report.ok() ? 0 : kCheckFailedExitCode;
   }
+  if (serve_command->parsed()) serveOutput(serve_dir, serve_port);
   if (report_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
