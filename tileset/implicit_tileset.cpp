@@ -447,6 +447,19 @@ bool tileKeyFromImplicitUri(const std::string& uri, TileKey& key) {
   return implicitContentUri(key) == uri;
 }
 
+std::string contentUri(const TileKey& key, bool implicit_tiling) {
+  return implicit_tiling ? implicitContentUri(key) : "tiles/" + key.path() + ".glb";
+}
+
+bool tileKeyFromContentUri(const std::string& uri, TileKey& key) {
+  if (tileKeyFromImplicitUri(uri, key)) return true;
+  int zoom = 0, x = 0, y = 0;
+  char tail[8] = {};
+  if (std::sscanf(uri.c_str(), "tiles/%d/%d/%d.%4s", &zoom, &x, &y, tail) != 4 || std::string(tail) != "glb") return false;
+  key = {zoom, x, y};
+  return true;
+}
+
 std::vector<ImplicitFile> writeImplicitTileset(const Tileset& tileset,
                                                std::int32_t subtree_levels) {
   if (subtree_levels < 1 || subtree_levels > kMaxSubtreeLevels) {

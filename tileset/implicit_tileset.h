@@ -52,9 +52,16 @@ ImplicitTileCoordinates implicitTileCoordinates(const TileKey& key);
 // template of its hemisphere's implicit root, filled in. Throws as implicitTileCoordinates.
 std::string implicitContentUri(const TileKey& key);
 
-// The tile whose content implicitContentUri names (for readers of an output, such as
-// `terratiles check`); false when `uri` is not such a name.
+// The tile whose content implicitContentUri names; false when `uri` is not such a name.
 bool tileKeyFromImplicitUri(const std::string& uri, TileKey& key);
+
+// The content name of a tile in an output: implicitContentUri with implicit tiling, else
+// "tiles/z/x/y.glb".
+std::string contentUri(const TileKey& key, bool implicit_tiling);
+
+// The tile a content name of either kind names (for readers of an output: `terratiles
+// check`, `terratiles report`); false for any other name.
+bool tileKeyFromContentUri(const std::string& uri, TileKey& key);
 
 struct ImplicitFile {
   std::string path;  // relative to the output directory, '/'-separated

@@ -1,6 +1,5 @@
 #include "src/pipeline/build_report.h"
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -93,7 +92,7 @@ json zoomsFromDisk(const fs::path& dir, const json& root, Progress& progress) {
   progress.beginStage("reading tiles", contents.size());
   for (const auto& [uri, error] : contents) {
     TileKey key;
-    if (!tileKeyFromImplicitUri(uri, key) && std::sscanf(uri.c_str(), "tiles/%d/%d/%d.glb", &key.zoom, &key.x, &key.y) != 3) {
+    if (!tileKeyFromContentUri(uri, key)) {
       throw Error(ErrorCode::Input, (dir / uri).string() + " is not named tiles/z/x/y.glb; expected a terratiles output");
     }
     std::ifstream in(dir / uri, std::ios::binary);

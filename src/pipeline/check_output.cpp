@@ -114,16 +114,6 @@ json readJson(const fs::path& path) {
   }
 }
 
-// tiles/z/x/y.glb -> the key; false for any other name.
-bool keyFromUri(const std::string& uri, TileKey& key) {
-  int z = 0, x = 0, y = 0;
-  char tail[8] = {};
-  if (tileKeyFromImplicitUri(uri, key)) return true;
-  if (std::sscanf(uri.c_str(), "tiles/%d/%d/%d.%4s", &z, &x, &y, tail) != 4) return false;
-  key = {z, x, y};
-  return true;
-}
-
 int addTile(const json& node, int parent, std::vector<CheckTile>& tiles) {
   const int index = static_cast<int>(tiles.size());
   tiles.emplace_back();
@@ -134,7 +124,7 @@ int addTile(const json& node, int parent, std::vector<CheckTile>& tiles) {
   if (node.contains("content")) {
     const std::string uri = node["content"].at("uri").get<std::string>();
     tiles[static_cast<std::size_t>(index)].uri = uri;
-    if (!keyFromUri(uri, tiles[static_cast<std::size_t>(index)].key)) {
+    if (!tileKeyFromContentUri(uri, tiles[static_cast<std::size_t>(index)].key)) {
       throw Error(ErrorCode::Input, "tileset.json: content " + uri + " is not named tiles/z/x/y.glb; expected a "
                                                                       "terratiles output");
     }

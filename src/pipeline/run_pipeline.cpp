@@ -156,13 +156,10 @@ double tileExtent(const PyramidTile& tile, const PlacedLevel& placed) {
   return std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 0.0});
 }
 
-// The step every tile of a zoom shares: the base step, or a power-of-two multiple of it
-// where the zoom's widest tile would need more than max_bits.
-double zoomPositionStep(const std::vector<PyramidTile>& tiles, const PlacedLevel& placed, double base_step,
-                        int max_bits) {
+double widestTileExtent(const std::vector<PyramidTile>& tiles, const PlacedLevel& placed) {
   double widest = 0;
   for (const PyramidTile& tile : tiles) widest = std::max(widest, tileExtent(tile, placed));
-  return sharedPositionStep(widest, base_step, max_bits);
+  return widest;
 }
 
 // One tile's content: its vertices relative to an origin on the quantisation grid, in the
@@ -481,9 +478,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   if (options.draco_position_bits > 0) {
     const ZoomContent& finest = zooms.back();
     const PlacedLevel placed = placeLevel(dem, *finest.mesh, to_wgs84, geoid ? &*geoid : nullptr);
-    double widest = 0;
-    for (const PyramidTile& tile : finest.tiles) widest = std::max(widest, tileExtent(tile, placed));
-    base_step_m = sharedPositionStep(widest, std::ldexp(1.0, -30), options.draco_position_bits);
+    base_step_m =
+        sharedPositionStep(widestTileExtent(finest.tiles, placed), std::ldexp(1.0, -30), options.draco_position_bits);
   }
   summary.position_step_m = base_step_m;
 
@@ -496,7 +492,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     const PlacedLevel placed = placeLevel(dem, *level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
     // One grid per zoom: the base step, unless the zoom's widest tile needs more than the
     // 2^23 steps Draco quantises exactly (tiles wider than about 65 km at 1/128 m).
-    glb.position_step_m = zoomPositionStep(level.tiles, placed, base_step_m, kMaxExactPositionBits);
+    glb.position_step_m = sharedPositionStep(widestTileExtent(level.tiles, placed), base_step_m, kMaxExactPositionBits);
     widest_step_m = std::max(widest_step_m, glb.position_step_m);
     ZoomSummary zoom_summary;
     zoom_summary.position_step_m = glb.position_step_m;
@@ -523,7 +519,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         const PyramidTile& tile = level.tiles[i];
         TileNode node;
         node.key = tile.key;
-        node.content_uri = options.implicit_tiling ? implicitContentUri(tile.key) : "tiles/" + tile.key.path() + ".glb";
+        node.content_uri = contentUri(tile.key, options.implicit_tiling);
         node.region = encoded[i - begin].region;
         // Measured: against the DEM and against the next finer zoom where both are drawn.
         node.geometric_error_m = std::max(tile.max_error_m, tile.finer_difference_m);

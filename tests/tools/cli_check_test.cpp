@@ -4,7 +4,6 @@
 // centroid (holes) and the grid pyramid (T-junctions) fail: the checker is not blind.
 #include <doctest/doctest.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -138,9 +137,7 @@ TEST_SUITE("check") {
           if (node.contains("content")) {
             const std::string uri = node["content"]["uri"];
             TileKey key;
-            if (!tileKeyFromImplicitUri(uri, key)) {
-              REQUIRE(std::sscanf(uri.c_str(), "tiles/%d/%d/%d.glb", &key.zoom, &key.x, &key.y) == 3);
-            }
+            REQUIRE(tileKeyFromContentUri(uri, key));
             out[key.path()] = {node["geometricError"].get<double>(), uri};
           }
           for (const auto& child : node.value("children", nlohmann::json::array())) collect(child, out);

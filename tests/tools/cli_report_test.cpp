@@ -4,7 +4,6 @@
 // --progress json ends with a summary line.
 #include <doctest/doctest.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -108,7 +107,7 @@ std::map<int, DiskZoom> zoomsOnDisk(const fs::path& dir) {
     if (node.contains("content")) {
       const std::string uri = node["content"]["uri"];
       TileKey key;
-      if (!tileKeyFromImplicitUri(uri, key)) REQUIRE(std::sscanf(uri.c_str(), "tiles/%d/%d/%d.glb", &key.zoom, &key.x, &key.y) == 3);
+      REQUIRE(tileKeyFromContentUri(uri, key));
       std::ifstream in(dir / uri, std::ios::binary);
       const std::vector<std::uint8_t> bytes{std::istreambuf_iterator<char>(in), {}};
       DiskZoom& z = zooms[key.zoom];
