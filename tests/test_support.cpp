@@ -9,6 +9,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "formats/geoid/read_geoid.h"
+#include "src/geo/dem_on_globe.h"
 #include "tools/terratiles/run_cli.h"
 
 namespace terratiles::test {
@@ -33,6 +35,14 @@ std::vector<std::vector<double>> lv95ReferenceRows() {
     rows.push_back(row);
   }
   return rows;
+}
+
+TinErrorStatistics measureOnGlobe(const DemGrid& dem, const TinMesh& mesh, const std::string& geoid_path) {
+  const GeoidGrid geoid = readGeoidGrid(geoid_path.empty() ? kDefaultGeoidPath : geoid_path);
+  const DemOnGlobe globe(dem, &geoid);
+  std::vector<EcefPoint> ecef(mesh.vertices.size());
+  globe.place(mesh.vertices, {}, ecef);
+  return measureTin(globe, mesh, ecef);
 }
 
 TempDir::TempDir() {

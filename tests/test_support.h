@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "src/dem/dem_grid.h"
+#include "src/tin/measure_tin.h"
 
 namespace terratiles::test {
 
@@ -41,6 +42,10 @@ DemGrid makeDem(int width, int height, double pixel_m,
 
 // Writes `dem` as a Float32 GeoTIFF (nodata -9999); `with_crs` false leaves the CRS out.
 void writeGeoTiff(const DemGrid& dem, const std::string& path, bool with_crs = true);
+
+// measureTin of `mesh` as the build measures it: on the globe of `dem` (DemOnGlobe), heights
+// orthometric above EGM96 unless `geoid_path` names another geoid grid.
+TinErrorStatistics measureOnGlobe(const DemGrid& dem, const TinMesh& mesh, const std::string& geoid_path = "");
 
 struct CliResult {
   int exit_code = -1;

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <limits>
 #include <sstream>
+#include <string>
 
 #include "src/base/error.h"
 
@@ -103,14 +104,20 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
 
   // Explicit quantisation on the shared grid: origin on a multiple of the step (the mesh
   // translation is on the grid too), range = step * (2^bits - 1) covering the extent.
+  // Draco keeps both in its options as text with six decimals (std::to_string), so they must
+  // come back from that text as the same floats, or every decoded position moves: the origin
+  // is a multiple of 1/64 (six decimals write it exactly) and the range at least 16 (its
+  // seventh decimal is then below half a float step). Measured before this rule: tiles
+  // under about 16 m across decoded 1 ulp (1 um) off the grid.
   const double step = options.position_step_m;
+  const double origin_grid = std::max(step, kDracoOriginGrid);
   float origin[3];
   double extent = 0;
   for (int k = 0; k < 3; ++k) {
-    origin[k] = static_cast<float>(std::floor(bounds.min[k] / step) * step);
+    origin[k] = static_cast<float>(std::floor(bounds.min[k] / origin_grid) * origin_grid);
     extent = std::max(extent, bounds.max[k] - origin[k]);
   }
-  const int bits = std::max(1, positionBitsFor(extent, step));
+  const int bits = std::max({1, positionBitsFor(extent, step), positionBitsFor(kDracoMinimumRange, step)});
   if (bits > std::min(options.max_position_bits, 30)) {
     throw Error(ErrorCode::Internal, "a tile spans " + std::to_string(extent) + " m: " + std::to_string(bits) +
                                          " quantisation bits at a step of " + std::to_string(step) +
@@ -118,6 +125,9 @@ DracoEncoded encodeDraco(const GlbMesh& mesh, const GlbOptions& options, const B
                                          " allowed; the step should have been widened (sharedPositionStep)");
   }
   const float range = static_cast<float>(step * (std::ldexp(1.0, bits) - 1));
+  for (const float value : {origin[0], origin[1], origin[2], range}) {
+    TERRATILES_ASSERT(std::stof(std::to_string(value)) == value);
+  }
 
   draco::Encoder encoder;
   encoder.SetAttributeExplicitQuantization(draco::GeometryAttribute::POSITION, bits, 3, origin,
@@ -156,8 +166,9 @@ int positionBitsFor(double extent_m, double step) {
 
 double sharedPositionStep(double widest_extent_m, double base_step, int max_bits) {
   double step = base_step;
-  // One step of margin: a tile's origin is its minimum snapped down to the grid.
-  while (positionBitsFor(widest_extent_m + step, step) > max_bits) step *= 2;
+  // A margin: a tile's quantisation origin is its minimum snapped down to the grid of its
+  // origins (encodeGlb).
+  while (positionBitsFor(widest_extent_m + std::max(step, kDracoOriginGrid), step) > max_bits) step *= 2;
   return step;
 }
 

@@ -22,6 +22,11 @@ namespace terratiles {
 // Draco quantises in float as floor(x / step + 0.5f): exact while x / step < 2^23 (above,
 // the + 0.5f rounds to even and a shared vertex may land one step apart in two tiles).
 constexpr int kMaxExactPositionBits = 23;
+// Draco keeps explicit quantisation parameters as six-decimal text: a tile's quantisation
+// origin is on this grid (or the step's, when coarser) and its range at least this many
+// metres, so that both come back as the same floats (see encodeGlb).
+constexpr double kDracoOriginGrid = 1.0 / 64;
+constexpr double kDracoMinimumRange = 16;
 
 struct GlbOptions {
   bool draco = true;

@@ -111,7 +111,13 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
   for (std::size_t l = 0;; ++l) {
     Level& level = levels[l];
     progress.beginStage("level " + std::to_string(l) + ": measuring", 0);
-    level.error = measureTin(dem, level.mesh);
+    if (options.globe) {
+      level.vertex_ecef.resize(level.mesh.vertices.size());
+      options.globe->place(level.mesh.vertices, {}, level.vertex_ecef);
+      level.error = measureTin(*options.globe, level.mesh, level.vertex_ecef);
+    } else {
+      level.error = measureTin(dem, level.mesh);
+    }
     if (l == 0) level.edge_count = meshEdgeKeys(level.mesh).size();  // coarser levels: counted below
     progress.endStage();
     const std::size_t triangles = level.mesh.triangleCount();
@@ -139,6 +145,8 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     simplify.edge_ratio = options.level_ratio;
     simplify.metres_per_col = metres[0];
     simplify.metres_per_row = metres[1];
+    simplify.globe = options.globe;
+    simplify.vertex_ecef = level.vertex_ecef;
     Level next;
     if (options.first_budget_m > 0 && std::isfinite(options.first_budget_m)) {
       next.budget_m = options.first_budget_m * std::pow(options.level_error_growth, static_cast<double>(l));

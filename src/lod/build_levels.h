@@ -10,7 +10,8 @@
 // stays locked for ever (paper figs 4, 42, 43); `repartition = false` keeps the first
 // partition's borders instead, for comparison.
 //
-// Every level's vertical error is measured against the DEM on every pixel (measureTin), and
+// Every level's vertical error is measured against the DEM on every pixel (measureTin; on the
+// globe, the level as drawn), and
 // after every level the loop checks (paper algorithm 2) that every constrained edge still
 // exists; a lost constraint is an Error(Internal), never silently accepted.
 
@@ -54,6 +55,10 @@ struct LevelOptions {
   // false: fixed borders, the scheme the paper compares against (fig 42): the finest level's
   // partition is kept at every level (each simplified triangle stays in its cluster).
   bool repartition = true;
+  // The DEM on the globe: every level is measured, and simplified under its budget, as drawn
+  // (straight triangles in ECEF, errors along each pixel's vertical; DemOnGlobe). nullptr: in
+  // the grid frame, heights interpolated linearly.
+  const DemOnGlobe* globe = nullptr;
 };
 
 struct Level {
@@ -67,6 +72,8 @@ struct Level {
   // Per vertex of this level: its index in the next coarser level, or kRemovedVertex.
   std::vector<std::uint32_t> index_in_coarser;
   TinErrorStatistics error;  // measured against the DEM
+  // With LevelOptions::globe: every vertex placed on the globe (DemOnGlobe::place).
+  std::vector<EcefPoint> vertex_ecef;
   std::size_t edge_count = 0;
   double budget_m = 0;  // the error budget this level was simplified under (0: none)
   std::size_t refused_for_error = 0, refused_for_flip = 0;

@@ -3,6 +3,7 @@
 #include <GeographicLib/Geocentric.hpp>
 #include <nlohmann/json.hpp>
 #include <ogr_spatialref.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -20,8 +21,9 @@
 #include "formats/geoid/read_geoid.h"
 #include "formats/gltf/read_glb.h"
 #include "src/base/error.h"
+#include "src/geo/dem_on_globe.h"
 #include "src/geo/geoid.h"
-#include "src/lod/build_levels.h"
+#include "src/pipeline/drawn_tiles.h"
 #include "src/tiling/tile_key.h"
 #include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"
@@ -34,50 +36,10 @@ using nlohmann::json;
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr std::size_t kMaxProblems = 12;
-
-// The pixels of triangle (a, b, c) (grid frame) whose centre lies inside it or within
-// `tolerance_px` of it, clipped to the grid: visit(pixel index, the triangle's plane height
-// there, whether the centre is inside). The tolerance absorbs the quantisation and the round trip through ECEF, which
-// move a vertex by far less than a pixel but decide whether a pixel centre exactly on an
-// outline is inside.
-template <typename Visit>
-void forEachPixelNear(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
-                      double tolerance_px, Visit&& visit) {
-  const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
-  if (area2 == 0) return;
-  const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - tolerance_px)));
-  const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + tolerance_px)));
-  const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - tolerance_px)));
-  const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + tolerance_px)));
-  for (int row = min_row; row <= max_row; ++row) {
-    for (int col = min_col; col <= max_col; ++col) {
-      const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
-      const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
-      const double wc = 1.0 - wa - wb;
-      const double eps = -1e-9;
-      if (wa >= eps && wb >= eps && wc >= eps) {
-        visit(dem.index(col, row), wa * a.height_m + wb * b.height_m + wc * c.height_m, true);
-        continue;
-      }
-      // Outside: covered when within the tolerance of an edge, with the height of the nearest
-      // point of that edge (no extrapolation past a sliver's sharp corner).
-      double nearest = tolerance_px, height = 0;
-      bool near = false;
-      for (const auto& [p, q] : {std::pair{&a, &b}, std::pair{&b, &c}, std::pair{&c, &a}}) {
-        const double ex = q->col - p->col, ey = q->row - p->row;
-        const double length2 = ex * ex + ey * ey;
-        const double t = length2 > 0 ? std::clamp(((col - p->col) * ex + (row - p->row) * ey) / length2, 0.0, 1.0) : 0;
-        const double distance = std::hypot(col - (p->col + t * ex), row - (p->row + t * ey));
-        if (distance <= nearest) {
-          nearest = distance;
-          height = p->height_m + t * (q->height_m - p->height_m);
-          near = true;
-        }
-      }
-      if (near) visit(dem.index(col, row), height, false);
-    }
-  }
-}
+// A decoded outline vertex is put back on its pixel centre when it decodes within this many
+// pixels of it (quantisation moves it by far less: a step is millimetres).
+constexpr double kLatticeTolerance_px = 0.1;
+constexpr double kPoleDeg = 90 - 1e-9;
 
 struct CheckTile {
   TileKey key;
@@ -87,18 +49,18 @@ struct CheckTile {
   int parent = -1;
   std::vector<int> children;
   std::vector<std::uint32_t> pixels;  // valid DEM pixels the content covers, sorted
-  std::vector<float> heights;         // the content's height at those pixels
-  std::vector<float> slack;           // what quantisation may move that height by
-  double measured_error_m = 0;        // max |content - DEM|
-  double excess_error_m = 0;          // max |content - DEM| - slack
+  DrawnTileMeasure measure;           // the decoded content against the DEM and the finer zoom
+  bool region_holds_content = true;
   // The content's outline: its vertices on boundary edges (an edge of one triangle), in the
-  // grid frame and as decoded (ECEF), and those edges.
+  // grid frame (outline vertices back on their pixel centres) and as decoded (ECEF), and
+  // those edges.
   std::vector<std::array<double, 2>> vertex_grid;
+  std::vector<std::uint8_t> vertex_at_pole;
   std::vector<std::array<double, 3>> vertex_ecef;
   std::vector<std::array<std::uint32_t, 2>> boundary_edges;
   std::vector<std::uint32_t> boundary_vertices;
-  double polar_cap_deg = 90;  // triangles at a pole reach down to this |latitude| (left out)
-  double position_step_m = 0; // the position grid of its zoom (build.json)
+  std::size_t off_lattice = 0;  // outline vertices farther than kLatticeTolerance_px from a pixel centre
+  std::size_t pole_vertices = 0;
 };
 
 json readJson(const fs::path& path) {
@@ -143,25 +105,49 @@ int addTile(const json& node, int parent, std::vector<CheckTile>& tiles) {
   return index;
 }
 
-// The content's triangles rasterised on the DEM's pixel centres: covered valid pixels, the
-// content's height there, and the max |content - DEM|.
-void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialReference& dem_crs,
-                   const GeoidGrid* geoid, double step_m, std::array<double, 2> metres_per_pixel, CheckTile& tile) {
+// One transformation from WGS84 to the DEM's CRS per thread (GDAL's are not thread-safe).
+class ToDemCrs {
+ public:
+  explicit ToDemCrs(const DemGrid& dem) {
+    dem_crs_.importFromWkt(dem.crs_wkt.c_str());
+    dem_crs_.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    wgs84_.importFromEPSG(4326);
+    wgs84_.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+  }
+  bool geographic() const { return dem_crs_.IsGeographic(); }
+  OGRCoordinateTransformation& local() {
+    std::unique_ptr<OGRCoordinateTransformation>& transform = per_thread_.local();
+    if (!transform) transform.reset(OGRCreateCoordinateTransformation(&wgs84_, &dem_crs_));
+    if (!transform) throw Error(ErrorCode::Internal, "no transformation from WGS84 to the DEM's CRS");
+    return *transform;
+  }
+
+ private:
+  OGRSpatialReference dem_crs_, wgs84_;
+  tbb::enumerable_thread_specific<std::unique_ptr<OGRCoordinateTransformation>> per_thread_;
+};
+
+// Decodes a tile and measures it (see the header): its coverage, its drawn error against the
+// DEM and against the finer zoom's surface (adding its own to `surface`), its outline.
+void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* geoid, ToDemCrs& to_dem,
+                      const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile) {
+  const DemGrid& dem = globe.dem();
   const DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
   const GlbMesh& mesh = decoded.mesh;
   const auto& earth = GeographicLib::Geocentric::WGS84();
   const std::size_t n = mesh.vertexCount();
+  std::vector<EcefPoint> ecef(n);
   std::vector<double> xs(n), ys(n), zs(n);
-  std::vector<std::array<double, 3>> ecef(n), up(n);
+  std::vector<std::uint8_t> at_pole(n, 0);
   for (std::size_t v = 0; v < n; ++v) {
+    // glTF y-up back to ECEF z-up: what a renderer draws, in double.
     const double gx = mesh.translation[0] + mesh.positions[3 * v];
     const double gy = mesh.translation[1] + mesh.positions[3 * v + 1];
     const double gz = mesh.translation[2] + mesh.positions[3 * v + 2];
-    double lat = 0, lon = 0, h = 0;
-    earth.Reverse(gx, -gz, gy, lat, lon, h);  // glTF y-up back to ECEF z-up
     ecef[v] = {gx, -gz, gy};
-    const double lat_rad = lat / kRadToDeg, lon_rad = lon / kRadToDeg;
-    up[v] = {std::cos(lat_rad) * std::cos(lon_rad), std::cos(lat_rad) * std::sin(lon_rad), std::sin(lat_rad)};
+    double lat = 0, lon = 0, h = 0;
+    earth.Reverse(ecef[v].x, ecef[v].y, ecef[v].z, lat, lon, h);
+    at_pole[v] = std::fabs(lat) >= kPoleDeg;
     if (geoid) {
       const std::optional<double> undulation = geoid->undulationAt(lon, lat);
       if (!undulation) throw Error(ErrorCode::Input, tile.uri + ": a vertex lies outside the geoid grid");
@@ -171,118 +157,28 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
     ys[v] = lat;
     zs[v] = h;
   }
-  OGRSpatialReference wgs84;
-  wgs84.importFromEPSG(4326);
-  wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-  std::unique_ptr<OGRCoordinateTransformation> to_dem(OGRCreateCoordinateTransformation(&wgs84, &dem_crs));
-  if (!to_dem) throw Error(ErrorCode::Internal, "no transformation from WGS84 to the DEM's CRS " + dem.crs_name);
-  std::vector<double> heights = zs;  // the transformation may touch z
-  std::vector<int> ok(n, 1);
-  if (n > 0 && !to_dem->Transform(n, xs.data(), ys.data(), heights.data(), ok.data())) {
+  std::vector<int> transformed(n, 1);
+  if (n > 0 && !to_dem.local().Transform(n, xs.data(), ys.data(), zs.data(), transformed.data())) {
     throw Error(ErrorCode::Input, tile.uri + ": vertices cannot be transformed back to " + dem.crs_name);
   }
   // A geographic DEM: longitudes back into the DEM's 360 degrees (lon 180 and -180 are one
-  // meridian), and vertices at a pole, whose longitude no decoding can give back, marked.
-  const bool geographic = dem_crs.IsGeographic();
-  std::vector<std::uint8_t> at_pole(n, 0);
-  std::vector<GridPoint> grid(n);
+  // meridian).
+  std::vector<GridCorner> grid(n);
   for (std::size_t v = 0; v < n; ++v) {
-    if (geographic) {
+    if (to_dem.geographic()) {
       while (xs[v] < dem.origin_x) xs[v] += 360;
       while (xs[v] >= dem.origin_x + 360) xs[v] -= 360;
-      // Quantisation moves a pole vertex off the pole by up to a step or so.
-      at_pole[v] = std::fabs(ys[v]) > 90 - std::max(1e-6, 4 * step_m / 111000.0);
     }
-    grid[v] = {(xs[v] - dem.origin_x) / dem.pixel_size_x - 0.5, (dem.origin_y - ys[v]) / dem.pixel_size_y - 0.5, zs[v]};
+    grid[v] = {(xs[v] - dem.origin_x) / dem.pixel_size_x - 0.5, (dem.origin_y - ys[v]) / dem.pixel_size_y - 0.5,
+               at_pole[v] != 0};
+    if (at_pole[v]) {
+      ++tile.pole_vertices;
+      grid[v].row = std::round(grid[v].row);  // the pole row; its column means nothing
+    }
   }
-  struct Sample {
-    std::uint32_t pixel;
-    float height;  // NaN: only near the content (covered, but not measured)
-    float slack;
-    float error;   // |content - DEM| by this triangle (its nearest edge point when only near)
-  };
-  std::vector<Sample> covered;
-  double max_error = 0, max_excess = -1e300;
   const auto& idx = mesh.triangle_indices;
-  // Quantisation moves a vertex by at most sqrt(3)/2 step in 3D: a plane's height at a fixed
-  // pixel by at most that times (1 + its slope).
-  // A geographic DEM's columns narrow with the cosine of the latitude (groundMetresPerPixel
-  // is at the centre latitude).
-  const double centre_cos = geographic ? std::cos(dem.pixelCentre(0, (dem.height - 1) / 2.0).y / kRadToDeg) : 1.0;
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    if (at_pole[idx[t]] || at_pole[idx[t + 1]] || at_pole[idx[t + 2]]) {
-      // Its place on the grid is unknown: leave it out, and the cap it reaches out of the check.
-      for (std::size_t k = 0; k < 3; ++k) {
-        if (!at_pole[idx[t + k]]) tile.polar_cap_deg = std::min(tile.polar_cap_deg, std::fabs(ys[idx[t + k]]));
-      }
-      continue;
-    }
-    const GridPoint &a = grid[idx[t]], &b = grid[idx[t + 1]], &c = grid[idx[t + 2]];
-    // The decoded triangle's slope, from its normal and the local vertical (right at any
-    // latitude, where metres per grid column vary).
-    const auto& pa = ecef[idx[t]];
-    const auto& pb = ecef[idx[t + 1]];
-    const auto& pc = ecef[idx[t + 2]];
-    const std::array<double, 3> u{pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
-    const std::array<double, 3> w{pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
-    const std::array<double, 3> normal{u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
-    const auto& vertical = up[idx[t]];
-    const double along = std::fabs(normal[0] * vertical[0] + normal[1] * vertical[1] + normal[2] * vertical[2]);
-    const double length = std::hypot(normal[0], normal[1], normal[2]);
-    const double across = std::sqrt(std::max(0.0, length * length - along * along));
-    const double slope = along > 0 ? across / along : 1e6;
-    const double column_m =
-        geographic ? metres_per_pixel[0] * std::sqrt(std::max(1e-12, 1 - vertical[2] * vertical[2])) / centre_cos
-                   : metres_per_pixel[0];
-    const double tolerance_px = 2 * step_m / std::min(column_m, metres_per_pixel[1]) + 1e-6;
-    const auto slack = static_cast<float>(0.87 * step_m * (1 + slope));
-    forEachPixelNear(dem, a, b, c, tolerance_px, [&](std::size_t pixel, double h, bool inside) {
-      const float dem_h = dem.heights_m[pixel];
-      if (std::isnan(dem_h)) return;
-      const auto error = static_cast<float>(std::fabs(h - dem_h));
-      covered.push_back({static_cast<std::uint32_t>(pixel), inside ? static_cast<float>(h) : std::nanf(""), slack,
-                         error});
-    });
-  }
-  // By pixel, measured samples first.
-  std::sort(covered.begin(), covered.end(), [](const Sample& l, const Sample& r) {
-    return l.pixel < r.pixel || (l.pixel == r.pixel && !std::isnan(l.height) && std::isnan(r.height));
-  });
-  tile.pixels.clear();
-  tile.heights.clear();
-  tile.slack.clear();
-  // A pixel's error: the smallest among the triangles it is in or within the tolerance of.
-  // Decoding moves vertices by up to a step, so a pixel within a step of an edge may belong
-  // to either side: next to a steep face, the wrong side's plane is far from the DEM.
-  for (std::size_t i = 0; i < covered.size();) {
-    std::size_t j = i;
-    float error = covered[i].error, slack = covered[i].slack;
-    bool measured = false;
-    for (; j < covered.size() && covered[j].pixel == covered[i].pixel; ++j) {
-      error = std::min(error, covered[j].error);
-      slack = std::max(slack, covered[j].slack);
-      measured |= !std::isnan(covered[j].height);
-    }
-    if (measured) {
-      max_error = std::max(max_error, static_cast<double>(error));
-      max_excess = std::max(max_excess, static_cast<double>(error) - slack);
-    }
-    tile.pixels.push_back(covered[i].pixel);
-    tile.heights.push_back(covered[i].height);
-    tile.slack.push_back(slack);
-    i = j;
-  }
-  tile.measured_error_m = max_error;
-  tile.excess_error_m = std::max(0.0, max_excess);
 
-  // The outline, for vertex correspondence.
-  tile.vertex_grid.resize(n);
-  tile.vertex_ecef.resize(n);
-  for (std::size_t v = 0; v < n; ++v) {
-    tile.vertex_grid[v] = {grid[v].col, grid[v].row};
-    tile.vertex_ecef[v] = {mesh.translation[0] + mesh.positions[3 * v], mesh.translation[1] + mesh.positions[3 * v + 1],
-                           mesh.translation[2] + mesh.positions[3 * v + 2]};
-  }
+  // The outline, and its vertices back on their pixel centres.
   std::vector<std::uint64_t> edges;
   edges.reserve(idx.size());
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
@@ -305,35 +201,77 @@ void rasteriseTile(const fs::path& dir, const DemGrid& dem, const OGRSpatialRefe
   std::sort(tile.boundary_vertices.begin(), tile.boundary_vertices.end());
   tile.boundary_vertices.erase(std::unique(tile.boundary_vertices.begin(), tile.boundary_vertices.end()),
                                tile.boundary_vertices.end());
+  std::vector<GridPoint> lattice(n);
+  for (std::size_t v = 0; v < n; ++v) lattice[v] = {grid[v].col, grid[v].row, 0};
+  for (const std::uint32_t v : tile.boundary_vertices) {
+    if (at_pole[v]) continue;
+    const double col = std::round(grid[v].col), row = std::round(grid[v].row);
+    if (std::fabs(grid[v].col - col) > kLatticeTolerance_px || std::fabs(grid[v].row - row) > kLatticeTolerance_px) {
+      ++tile.off_lattice;
+      continue;
+    }
+    lattice[v].col = col;
+    lattice[v].row = row;
+  }
+
+  // Coverage: the grid pixels inside its triangles; a triangle with a pole vertex (no
+  // column) covers the pixels whose verticals meet it.
+  std::vector<std::uint32_t> covered;
+  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    const std::uint32_t a = idx[t], b = idx[t + 1], c = idx[t + 2];
+    const auto add = [&](std::size_t pixel) {
+      if (!std::isnan(dem.heights_m[pixel])) covered.push_back(static_cast<std::uint32_t>(pixel));
+    };
+    if (at_pole[a] || at_pole[b] || at_pole[c]) {
+      const DrawnTriangle triangle(ecef[a], ecef[b], ecef[c]);
+      const PixelBox box = candidatePixels(globe, {grid[a], grid[b], grid[c]}, triangle.longestEdge(), 1e-3);
+      forEachPixelMeeting(globe, triangle, box, [&](std::size_t pixel, double) { add(pixel); });
+      continue;
+    }
+    forEachCoveredPixel(dem, lattice[a], lattice[b], lattice[c], [&](std::size_t pixel, double) {
+      add(pixel);
+      return true;
+    });
+  }
+  std::sort(covered.begin(), covered.end());
+  covered.erase(std::unique(covered.begin(), covered.end()), covered.end());
+  tile.pixels = std::move(covered);
+
+  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them).
+  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface);
+  const Region content = drawnRegion(ecef, idx);
+  const auto& r = tile.region;
+  tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&
+                                                content.east_rad <= r[2] && content.north_rad <= r[3] &&
+                                                content.min_height_m >= r[4] && content.max_height_m <= r[5]);
+
+  tile.vertex_grid.resize(n);
+  tile.vertex_ecef.resize(n);
+  tile.vertex_at_pole = at_pole;
+  for (std::size_t v = 0; v < n; ++v) {
+    tile.vertex_grid[v] = {lattice[v].col, lattice[v].row};
+    tile.vertex_ecef[v] = {ecef[v].x, ecef[v].y, ecef[v].z};
+  }
 }
 
 // Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that
 // a viewer may draw side by side: an outline vertex of one that lies on an outline edge of
-// the other (within `tolerance_px`) must be a vertex of it, at the same decoded position
-// (within `same_position_m`). Returns the outline vertices that are not.
-// The polar caps a geographic DEM's check leaves out (see CheckReport::polar_cap_deg), on
-// the grid: rows poleward of cap_deg.
-struct PolarCaps {
-  const DemGrid* dem = nullptr;
-  double cap_deg = 90;
-  bool contain(const std::array<double, 2>& grid_point) const {
-    return cap_deg < 90 && std::fabs(dem->pixelCentre(grid_point[0], grid_point[1]).y) >= cap_deg;
-  }
-};
-
-std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, double tolerance_px,
-                                  double same_position_m, const PolarCaps& caps,
-                                  std::array<double, 2>* first_missing = nullptr) {
+// the other (in the grid, back on their pixel centres) must be a vertex of it. Returns the
+// outline vertices that are not; vertices at a pole are left out (they have no column, and
+// every pole triangle shares the one pole vertex).
+std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, std::array<double, 2>* first_missing = nullptr) {
+  constexpr double kOnEdge_px = 1e-6;
   // The other tile's outline edges by 8-pixel cell.
   constexpr double kCell = 8;
   std::map<std::pair<std::int64_t, std::int64_t>, std::vector<std::size_t>> cells;
   for (std::size_t e = 0; e < to.boundary_edges.size(); ++e) {
+    if (to.vertex_at_pole[to.boundary_edges[e][0]] || to.vertex_at_pole[to.boundary_edges[e][1]]) continue;
     const auto& a = to.vertex_grid[to.boundary_edges[e][0]];
     const auto& b = to.vertex_grid[to.boundary_edges[e][1]];
-    const auto c0 = static_cast<std::int64_t>(std::floor((std::min(a[0], b[0]) - tolerance_px) / kCell));
-    const auto c1 = static_cast<std::int64_t>(std::floor((std::max(a[0], b[0]) + tolerance_px) / kCell));
-    const auto r0 = static_cast<std::int64_t>(std::floor((std::min(a[1], b[1]) - tolerance_px) / kCell));
-    const auto r1 = static_cast<std::int64_t>(std::floor((std::max(a[1], b[1]) + tolerance_px) / kCell));
+    const auto c0 = static_cast<std::int64_t>(std::floor((std::min(a[0], b[0]) - kOnEdge_px) / kCell));
+    const auto c1 = static_cast<std::int64_t>(std::floor((std::max(a[0], b[0]) + kOnEdge_px) / kCell));
+    const auto r0 = static_cast<std::int64_t>(std::floor((std::min(a[1], b[1]) - kOnEdge_px) / kCell));
+    const auto r1 = static_cast<std::int64_t>(std::floor((std::max(a[1], b[1]) + kOnEdge_px) / kCell));
     if ((c1 - c0 + 1) * (r1 - r0 + 1) > 4096) continue;  // a degenerate outline edge spanning the world
     for (std::int64_t r = r0; r <= r1; ++r) {
       for (std::int64_t c = c0; c <= c1; ++c) cells[{c, r}].push_back(e);
@@ -341,8 +279,8 @@ std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, do
   }
   std::size_t missing = 0;
   for (const std::uint32_t v : from.boundary_vertices) {
+    if (from.vertex_at_pole[v]) continue;
     const auto& p = from.vertex_grid[v];
-    if (caps.contain(p)) continue;
     const auto found = cells.find({static_cast<std::int64_t>(std::floor(p[0] / kCell)),
                                    static_cast<std::int64_t>(std::floor(p[1] / kCell))});
     if (found == cells.end()) continue;
@@ -354,12 +292,10 @@ std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, do
       const double ex = b[0] - a[0], ey = b[1] - a[1];
       const double length2 = ex * ex + ey * ey;
       const double t = length2 > 0 ? std::clamp(((p[0] - a[0]) * ex + (p[1] - a[1]) * ey) / length2, 0.0, 1.0) : 0;
-      if (std::hypot(p[0] - (a[0] + t * ex), p[1] - (a[1] + t * ey)) > tolerance_px) continue;
+      if (std::hypot(p[0] - (a[0] + t * ex), p[1] - (a[1] + t * ey)) > kOnEdge_px) continue;
       on_edge = true;
       for (const std::uint32_t end : {ia, ib}) {
-        const auto& q = to.vertex_ecef[end];
-        const auto& w = from.vertex_ecef[v];
-        if (std::hypot(q[0] - w[0], q[1] - w[1], q[2] - w[2]) <= same_position_m) matched = true;
+        if (to.vertex_grid[end][0] == p[0] && to.vertex_grid[end][1] == p[1]) matched = true;
       }
     }
     if (on_edge && !matched && missing++ == 0 && first_missing) *first_missing = p;
@@ -367,39 +303,31 @@ std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, do
   return missing;
 }
 
-// Outline vertices two touching contents share (the same DEM point: back on the grid within a
-// quarter pixel of one pixel centre in both) and how far apart they decode.
-constexpr double kSharedVertexGap_m = 1e-3;
-
+// Outline vertices two touching contents share (the same DEM point: back on one pixel centre
+// in both) and how far apart they decode: nothing at all, or it is a gap.
 struct SharedVertexGaps {
   std::size_t shared = 0;
-  std::size_t too_far = 0;  // further apart than allowed_m
+  std::size_t apart = 0;
   double worst_m = 0;
 };
 
-SharedVertexGaps sharedVertexGaps(const CheckTile& a, const CheckTile& b, double allowed_m) {
-  const auto pixelOf = [](const std::array<double, 2>& p, std::pair<std::int64_t, std::int64_t>& key) {
-    const double col = std::round(p[0]), row = std::round(p[1]);
-    if (std::fabs(p[0] - col) > 0.25 || std::fabs(p[1] - row) > 0.25) return false;
-    key = {static_cast<std::int64_t>(col), static_cast<std::int64_t>(row)};
-    return true;
-  };
-  std::map<std::pair<std::int64_t, std::int64_t>, std::uint32_t> outline_of_b;
-  std::pair<std::int64_t, std::int64_t> key;
+SharedVertexGaps sharedVertexGaps(const CheckTile& a, const CheckTile& b) {
+  std::map<std::pair<double, double>, std::uint32_t> outline_of_b;
   for (const std::uint32_t v : b.boundary_vertices) {
-    if (pixelOf(b.vertex_grid[v], key)) outline_of_b.emplace(key, v);
+    if (!b.vertex_at_pole[v]) outline_of_b.emplace(std::pair{b.vertex_grid[v][0], b.vertex_grid[v][1]}, v);
   }
   SharedVertexGaps gaps;
   for (const std::uint32_t v : a.boundary_vertices) {
-    if (!pixelOf(a.vertex_grid[v], key)) continue;
-    const auto found = outline_of_b.find(key);
+    if (a.vertex_at_pole[v]) continue;
+    const auto found = outline_of_b.find({a.vertex_grid[v][0], a.vertex_grid[v][1]});
     if (found == outline_of_b.end()) continue;
     const auto& p = a.vertex_ecef[v];
     const auto& q = b.vertex_ecef[found->second];
-    const double gap = std::hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
     ++gaps.shared;
-    gaps.worst_m = std::max(gaps.worst_m, gap);
-    if (gap > allowed_m) ++gaps.too_far;
+    if (p != q) {
+      ++gaps.apart;
+      gaps.worst_m = std::max(gaps.worst_m, std::hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]));
+    }
   }
   return gaps;
 }
@@ -454,52 +382,68 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   if (build.value("heights", std::string("orthometric")) == "orthometric") {
     geoid = readGeoidGrid(build.at("geoid").get<std::string>());
   }
-  // The quantisation grid of each zoom (older outputs: the widest for all).
-  const double step_m = build.value("position_step_m", 1.0 / 128);
-  for (CheckTile& tile : tiles) {
-    tile.position_step_m = step_m;
-    if (build.contains("position_step_m_by_zoom")) {
-      tile.position_step_m = build["position_step_m_by_zoom"].value(std::to_string(tile.key.zoom), step_m);
-    }
-  }
   progress.endStage();
-  const std::array<double, 2> metres_per_pixel = groundMetresPerPixel(dem);
-  OGRSpatialReference dem_crs;
-  dem_crs.importFromWkt(dem.crs_wkt.c_str());
-  dem_crs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-
-  progress.beginStage("decoding and rasterising tiles", tiles.size());
-  tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
-    if (!tiles[i].uri.empty()) {
-      rasteriseTile(dir, dem, dem_crs, geoid ? &*geoid : nullptr, std::max(tiles[i].position_step_m, 1e-9),
-                    metres_per_pixel, tiles[i]);
-    }
-  });
-  progress.advance(tiles.size());
-  progress.endStage();
+  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  ToDemCrs to_dem(dem);
   const auto problem = [&](const std::string& text) {
     if (report.problems.size() < kMaxProblems) report.problems.push_back(text);
   };
 
-  // ---- 3. honest errors and regions ----
+  // ---- 2. every tile decoded and measured, finest zoom first (each against the finer
+  //      zoom's drawn surface) ----
   std::int32_t min_zoom = 1 << 30, max_zoom = -1;
   for (const CheckTile& tile : tiles) {
     if (tile.uri.empty()) continue;
     ++report.tiles;
     min_zoom = std::min(min_zoom, tile.key.zoom);
     max_zoom = std::max(max_zoom, tile.key.zoom);
-    // Decoded positions are within sqrt(3)/2 step of the written ones (see rasteriseTile).
-    if (tile.geometric_error_m > 0) {
-      report.worst_error_ratio = std::max(report.worst_error_ratio, tile.excess_error_m / tile.geometric_error_m);
-    }
-    if (tile.excess_error_m > tile.geometric_error_m) {
-      ++report.dishonest_errors;
-      problem("tile " + keyText(tile.key) + ": measured error " + std::to_string(tile.measured_error_m) +
-              " m > geometricError " + std::to_string(tile.geometric_error_m) + " m");
-    }
   }
   if (report.tiles == 0) throw Error(ErrorCode::Input, output_dir + ": tileset.json has no content");
   report.zooms = static_cast<std::size_t>(max_zoom - min_zoom + 1);
+  progress.beginStage("decoding and measuring tiles", report.tiles);
+  ZoomSurface finer;
+  for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
+    std::vector<std::size_t> at_zoom;
+    for (std::size_t i = 0; i < tiles.size(); ++i) {
+      if (!tiles[i].uri.empty() && tiles[i].key.zoom == zoom) at_zoom.push_back(i);
+    }
+    ZoomSurface surface(dem.pixelCount());
+    tbb::parallel_for(std::size_t{0}, at_zoom.size(), [&](std::size_t k) {
+      checkTileContent(dir, globe, geoid ? &*geoid : nullptr, to_dem, finer.empty() ? nullptr : &finer, surface,
+                       tiles[at_zoom[k]]);
+    });
+    finer = std::move(surface);
+    progress.advance(at_zoom.size());
+  }
+  progress.endStage();
+
+  for (const CheckTile& tile : tiles) {
+    if (tile.uri.empty()) continue;
+    report.measured_pixels += tile.measure.hits;
+    report.overlap_pixels += tile.measure.finer_hits;
+    report.pole_vertices += tile.pole_vertices;
+    report.moved_outline_vertices += tile.off_lattice;
+    if (tile.geometric_error_m > 0) {
+      report.worst_error_ratio = std::max(report.worst_error_ratio, tile.measure.max_error_m / tile.geometric_error_m);
+      report.worst_overlap_ratio =
+          std::max(report.worst_overlap_ratio, tile.measure.finer_difference_m / tile.geometric_error_m);
+    }
+    if (tile.measure.max_error_m > tile.geometric_error_m) {
+      ++report.dishonest_errors;
+      problem("tile " + keyText(tile.key) + ": decoded error " + std::to_string(tile.measure.max_error_m) +
+              " m > geometricError " + std::to_string(tile.geometric_error_m) + " m");
+    }
+    if (tile.measure.finer_difference_m > tile.geometric_error_m) {
+      ++report.overlap_disagreements;
+      problem("tile " + keyText(tile.key) + ": differs from the finer zoom by " +
+              std::to_string(tile.measure.finer_difference_m) + " m where both are drawn, geometricError " +
+              std::to_string(tile.geometric_error_m) + " m");
+    }
+    if (!tile.region_holds_content) {
+      ++report.content_region_violations;
+      problem("tile " + keyText(tile.key) + ": its content reaches outside its region");
+    }
+  }
   for (const CheckTile& tile : tiles) {
     if (tile.parent < 0) continue;
     const CheckTile& parent = tiles[static_cast<std::size_t>(tile.parent)];
@@ -509,9 +453,7 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     }
     const auto& r = tile.region;
     const auto& p = parent.region;
-    constexpr double kTolerance = 1e-12;
-    if (r[0] < p[0] - kTolerance || r[1] < p[1] - kTolerance || r[2] > p[2] + kTolerance ||
-        r[3] > p[3] + kTolerance || r[4] < p[4] - 1e-6 || r[5] > p[5] + 1e-6) {
+    if (r[0] < p[0] || r[1] < p[1] || r[2] > p[2] || r[3] > p[3] || r[4] < p[4] || r[5] > p[5]) {
       ++report.region_violations;
       problem("tile " + keyText(tile.key) + ": region outside its parent's");
     }
@@ -523,18 +465,28 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     if (tile.uri.empty() || tile.key.zoom != max_zoom) continue;
     for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
   }
-  // Triangles at a pole were left out (their grid position is unknown): so is the cap they
-  // reach.
-  double polar_cap_deg = 90;
-  for (const CheckTile& tile : tiles) polar_cap_deg = std::min(polar_cap_deg, tile.polar_cap_deg);
-  if (polar_cap_deg < 90) {
-    report.polar_cap_deg = polar_cap_deg;
-    for (std::int32_t row = 0; row < dem.height; ++row) {
-      if (std::fabs(dem.pixelCentre(0, row).y) < polar_cap_deg) continue;
-      for (std::int32_t col = 0; col < dem.width; ++col) footprint[dem.index(col, row)] = 0;
+  for (std::int32_t row = 0; row < dem.height; ++row) {
+    for (std::int32_t col = 0; col < dem.width; ++col) {
+      const std::size_t p = dem.index(col, row);
+      if (footprint[p]) {
+        ++report.footprint_pixels;
+        continue;
+      }
+      if (!dem.isValid(col, row)) continue;
+      ++report.uncovered_valid_pixels;
+      bool touches_nodata = false;
+      for (int dr = -1; dr <= 1 && !touches_nodata; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int r = row + dr, c = col + dc;
+          if (r >= 0 && c >= 0 && r < dem.height && c < dem.width && !dem.isValid(c, r)) touches_nodata = true;
+        }
+      }
+      if (!touches_nodata && report.left_out_pixels++ == 0) {
+        problem("the finest zoom leaves out valid pixel (" + std::to_string(col) + ", " + std::to_string(row) +
+                "), which does not touch nodata");
+      }
     }
   }
-  for (const std::uint8_t f : footprint) report.footprint_pixels += f;
   std::vector<std::uint32_t> stamp(dem.pixelCount(), 0);
   std::uint32_t cut_id = 0;
   const auto holesOf = [&](const std::vector<int>& cut) {
@@ -625,26 +577,13 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     std::vector<std::size_t> missing(pairs.size(), 0);
     std::vector<SharedVertexGaps> gaps(pairs.size());
     std::vector<std::array<double, 2>> first_missing(pairs.size());
-    // Like coverage, leave out the polar caps where triangles at a pole could not be put
-    // back on the grid (their outlines there are the check's cut, not the tiles').
-    const PolarCaps caps{&dem, report.polar_cap_deg};
     tbb::parallel_for(std::size_t{0}, pairs.size(), [&](std::size_t k) {
       const CheckTile& a = tiles[static_cast<std::size_t>(pairs[k][0])];
       const CheckTile& b = tiles[static_cast<std::size_t>(pairs[k][1])];
-      // A vertex both contents hold decodes to one position when both zooms share a grid:
-      // allow 1 mm. Where a wide zoom uses a coarser grid, the coarser tile rounds it to
-      // its own step: allow twice that.
-      const double step = std::max(a.position_step_m, b.position_step_m);
-      const double allowed_m = a.position_step_m == b.position_step_m ? kSharedVertexGap_m
-                                                                      : std::max(kSharedVertexGap_m, 2 * step);
-      gaps[k] = sharedVertexGaps(a, b, allowed_m);
+      gaps[k] = sharedVertexGaps(a, b);
       if (a.key.zoom != b.key.zoom) {
-        // On an edge: within one quantisation step of it. Decoding moves a vertex and an edge by
-        // up to 0.87 step each, so an exact T-junction may read up to 1.7 steps off and a lattice
-        // point passing an edge within a step reads as one: the figure is exact to a step.
-        const double tolerance_px = step / std::max(metres_per_pixel[0], metres_per_pixel[1]);
-        missing[k] = missingBorderVertices(a, b, tolerance_px, allowed_m, caps, &first_missing[k]);
-        missing[k] += missingBorderVertices(b, a, tolerance_px, allowed_m, caps, missing[k] ? nullptr : &first_missing[k]);
+        missing[k] = missingBorderVertices(a, b, &first_missing[k]);
+        missing[k] += missingBorderVertices(b, a, missing[k] ? nullptr : &first_missing[k]);
       }
     });
     for (std::size_t k = 0; k < pairs.size(); ++k) {
@@ -658,56 +597,15 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
                 std::to_string(first_missing[k][0]) + ", " + std::to_string(first_missing[k][1]) + ")");
       }
       report.shared_border_vertices += gaps[k].shared;
-      report.shared_vertex_gaps += gaps[k].too_far;
-      if (a.position_step_m == b.position_step_m) {
-        report.worst_shared_vertex_gap_m = std::max(report.worst_shared_vertex_gap_m, gaps[k].worst_m);
-      } else {
-        report.worst_shared_vertex_gap_coarser_grid_m =
-            std::max(report.worst_shared_vertex_gap_coarser_grid_m, gaps[k].worst_m);
-      }
-      if (gaps[k].too_far > 0) {
-        problem("tiles " + keyText(a.key) + " and " + keyText(b.key) + ": " + std::to_string(gaps[k].too_far) +
-                " shared outline vertices decode " + std::to_string(gaps[k].worst_m * 1000) + " mm apart");
+      report.shared_vertex_gaps += gaps[k].apart;
+      report.worst_shared_vertex_gap_m = std::max(report.worst_shared_vertex_gap_m, gaps[k].worst_m);
+      if (gaps[k].apart > 0) {
+        problem("tiles " + keyText(a.key) + " and " + keyText(b.key) + ": " + std::to_string(gaps[k].apart) +
+                " shared outline vertices decode apart (up to " + std::to_string(gaps[k].worst_m * 1000) + " mm)");
       }
     }
     progress.endStage();
   }
-
-  // ---- 2. overlap agreement between adjacent zooms ----
-  progress.beginStage("overlap agreement", 0);
-  const std::size_t zoom_count = report.zooms;
-  std::vector<std::vector<float>> height_at(zoom_count, std::vector<float>(dem.pixelCount(), std::nanf("")));
-  std::vector<std::vector<float>> error_at(zoom_count, std::vector<float>(dem.pixelCount(), 1e30f));
-  std::vector<std::vector<float>> slack_at(zoom_count, std::vector<float>(dem.pixelCount(), 0.0f));
-  for (const CheckTile& tile : tiles) {
-    if (tile.uri.empty()) continue;
-    const auto z = static_cast<std::size_t>(tile.key.zoom - min_zoom);
-    for (std::size_t i = 0; i < tile.pixels.size(); ++i) {
-      if (std::isnan(tile.heights[i])) continue;
-      height_at[z][tile.pixels[i]] = tile.heights[i];
-      slack_at[z][tile.pixels[i]] = std::max(slack_at[z][tile.pixels[i]], tile.slack[i]);
-      error_at[z][tile.pixels[i]] = std::min(error_at[z][tile.pixels[i]], static_cast<float>(tile.geometric_error_m));
-    }
-  }
-  for (std::size_t z = 0; z + 1 < zoom_count; ++z) {
-    for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
-      const float coarse = height_at[z][p], fine = height_at[z + 1][p];
-      if (std::isnan(coarse) || std::isnan(fine)) continue;
-      ++report.overlap_pixels;
-      const double difference =
-          std::max(0.0, std::fabs(static_cast<double>(coarse) - fine) - slack_at[z][p] - slack_at[z + 1][p]);
-      const double allowed = error_at[z][p];
-      if (allowed > 0) report.worst_overlap_ratio = std::max(report.worst_overlap_ratio, difference / allowed);
-      if (difference > allowed) {
-        ++report.overlap_disagreements;
-        problem("zooms " + std::to_string(min_zoom + static_cast<std::int32_t>(z)) + " and " +
-                std::to_string(min_zoom + static_cast<std::int32_t>(z) + 1) + " differ by " +
-                std::to_string(difference) + " m at pixel (" + std::to_string(p % dem.width) + ", " +
-                std::to_string(p / dem.width) + "), geometricError " + std::to_string(allowed) + " m");
-      }
-    }
-  }
-  progress.endStage();
   return report;
 }
 
@@ -715,25 +613,25 @@ std::string describeCheck(const CheckReport& r) {
   std::ostringstream text;
   text << "terratiles check: " << (r.ok() ? "ok" : "FAILED") << "\n";
   text << "  " << r.tiles << " tiles over " << r.zooms << " zooms; footprint " << r.footprint_pixels << " pixels";
-  if (r.polar_cap_deg < 90) text << " (poleward of +-" << r.polar_cap_deg << " deg left out: triangles at a pole)";
+  if (r.pole_vertices > 0) text << " (" << r.pole_vertices << " vertices at a pole, measured as drawn)";
   text << "\n";
   text << "  coverage: " << r.cuts << " cuts with neighbours at most one zoom apart, " << r.cuts_with_holes
-       << " with holes (" << r.hole_pixels << " pixels)\n";
+       << " with holes (" << r.hole_pixels << " pixels); " << r.uncovered_valid_pixels
+       << " valid pixels outside the footprint, " << r.left_out_pixels << " of them not next to nodata\n";
   text << "            " << r.unbalanced_cuts << " random cuts with neighbours two or more zooms apart, "
        << r.unbalanced_cuts_with_holes << " with holes (" << r.unbalanced_hole_pixels << " pixels; reported only)\n";
   text << "  vertices: " << r.neighbour_pairs << " pairs of touching tiles one zoom apart, "
-       << r.missing_border_vertices << " outline vertices missing where their contents meet\n";
+       << r.missing_border_vertices << " outline vertices missing where their contents meet, "
+       << r.moved_outline_vertices << " off the pixel lattice (moved by a level before it was locked)\n";
   text << "  shared:   " << r.shared_border_vertices << " outline vertices two touching tiles share (same zoom or "
-       << "one apart), worst gap " << r.worst_shared_vertex_gap_m * 1000 << " mm on one grid";
-  if (r.worst_shared_vertex_gap_coarser_grid_m > 0) {
-    text << ", " << r.worst_shared_vertex_gap_coarser_grid_m * 1000 << " mm where a zoom uses a coarser grid";
-  }
-  text << "; " << r.shared_vertex_gaps << " too far apart\n";
-  text << "  overlap:  " << r.overlap_pixels << " pixels covered at two adjacent zooms, " << r.overlap_disagreements
-       << " differ by more than the coarser geometricError (worst " << r.worst_overlap_ratio << " of it)\n";
-  text << "  errors:   " << r.dishonest_errors << " tiles whose measured error exceeds their geometricError (worst "
-       << r.worst_error_ratio << " of it), " << r.error_order_violations << " above their parent's, "
-       << r.region_violations << " regions outside their parent's\n";
+       << "one apart), " << r.shared_vertex_gaps << " decoding apart (worst " << r.worst_shared_vertex_gap_m * 1000
+       << " mm)\n";
+  text << "  errors:   " << r.measured_pixels << " pixel verticals meeting a decoded triangle; " << r.dishonest_errors
+       << " tiles whose decoded error exceeds their geometricError (worst " << r.worst_error_ratio << " of it)\n";
+  text << "  overlap:  " << r.overlap_pixels << " of them also drawn at the finer zoom, " << r.overlap_disagreements
+       << " tiles differing from it by more than their geometricError (worst " << r.worst_overlap_ratio << " of it)\n";
+  text << "  tree:     " << r.error_order_violations << " geometricErrors above their parent's, " << r.region_violations
+       << " regions outside their parent's, " << r.content_region_violations << " contents outside their region\n";
   for (const std::string& problem : r.problems) text << "  problem:  " << problem << "\n";
   return text.str();
 }

@@ -412,18 +412,21 @@ std::string renderReportHtml(const json& report) {
          << table(check, {{"cuts", "balanced cuts checked"},
                           {"cuts_with_holes", "cuts with holes"},
                           {"hole_pixels", "hole pixels"},
+                          {"left_out_pixels", "valid pixels left out (not next to nodata)"},
                           {"neighbour_pairs", "touching tile pairs one zoom apart"},
                           {"missing_border_vertices", "outline vertices missing (T-junctions)"},
                           {"shared_border_vertices", "outline vertices shared by touching tiles"},
+                          {"shared_vertex_gaps", "shared vertices decoding apart"},
                           {"worst_shared_vertex_gap_m", "worst gap between shared vertices (m)"},
-                          {"shared_vertex_gaps", "shared vertices too far apart"},
-                          {"overlap_pixels", "pixels drawn at two adjacent zooms"},
-                          {"overlap_disagreements", "overlap disagreements"},
-                          {"worst_overlap_ratio", "worst overlap / geometricError"},
-                          {"dishonest_errors", "tiles with a dishonest geometricError"},
-                          {"worst_error_ratio", "worst measured error / geometricError"},
+                          {"measured_pixels", "pixel verticals meeting a decoded triangle"},
+                          {"dishonest_errors", "tiles whose decoded error exceeds their geometricError"},
+                          {"worst_error_ratio", "worst decoded error / geometricError"},
+                          {"overlap_pixels", "of them also drawn at the finer zoom"},
+                          {"overlap_disagreements", "tiles differing from the finer zoom by more"},
+                          {"worst_overlap_ratio", "worst difference / geometricError"},
                           {"error_order_violations", "errors above their parent's"},
-                          {"region_violations", "regions outside their parent's"}});
+                          {"region_violations", "regions outside their parent's"},
+                          {"content_region_violations", "contents outside their region"}});
     if (check.contains("summary") && check["summary"].is_string()) {
       html << "<pre>" << escape(check["summary"].get<std::string>()) << "</pre>";
     }

@@ -13,20 +13,22 @@ constexpr int kErrorClasses = 10;
 }  // namespace
 
 ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition,
-                      const TileFrame* frame, std::int32_t zoom, double error_scale_m, int max_side_px) {
-  // Per DEM pixel: the cluster (or face) covering it and |surface - DEM|.
+                      const TileFrame* frame, std::int32_t zoom, double error_scale_m, const ZoomSurface& surface,
+                      int max_side_px) {
+  // Per DEM pixel: the cluster (or face) covering it, and the drawn surface's error.
   std::vector<std::int32_t> cluster(dem.pixelCount(), -1);
   std::vector<float> error(dem.pixelCount(), std::nanf(""));
   const auto& idx = mesh.triangle_indices;
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
     const std::int32_t id = partition ? partition->cluster_of_face[t / 3] : 0;
     forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
-                        [&](std::size_t pixel, double surface_m) {
+                        [&](std::size_t pixel, double) {
                           cluster[pixel] = id;
-                          const float h = dem.heights_m[pixel];
-                          if (!std::isnan(h)) error[pixel] = static_cast<float>(std::fabs(surface_m - h));
                           return true;
                         });
+  }
+  for (std::size_t pixel = 0; pixel < dem.pixelCount(); ++pixel) {
+    if (surface.drawn(pixel) && !std::isnan(dem.heights_m[pixel])) error[pixel] = static_cast<float>(surface.error(pixel));
   }
 
   const int scale = std::max(1, static_cast<int>(std::ceil(static_cast<double>(std::max(dem.width, dem.height)) /

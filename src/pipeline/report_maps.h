@@ -1,7 +1,8 @@
 #pragma once
 // Pictures of one zoom for the build report, like the paper's figures: a map of the clusters
 // the zoom's tiles are made of (each its colour, cluster borders black: the edges that stayed
-// locked, tile outlines white) and a map of the vertical error against the DEM, both on the
+// locked, tile outlines white) and a map of the vertical error against the DEM (of the tiles
+// as decoded and drawn), both on the
 // DEM's grid reduced to at most `max_side_px` pixels a side (a map pixel shows the cluster
 // at its centre and the largest error in its block, in ten classes of a tenth of the scale).
 
@@ -10,6 +11,7 @@
 #include "formats/image/png_image.h"
 #include "src/dem/dem_grid.h"
 #include "src/partition/partition_faces.h"
+#include "src/pipeline/drawn_tiles.h"
 #include "src/tiling/assign_clusters.h"
 #include "src/tin/tin_mesh.h"
 
@@ -24,8 +26,10 @@ struct ZoomMaps {
 };
 
 // partition: a cluster per face of `mesh` (nullptr: faces coloured by tile instead).
-// frame: draws the zoom's tile outlines (nullptr: none).
+// frame: draws the zoom's tile outlines (nullptr: none). surface: the zoom's drawn surface
+// (its tiles as decoded, measured along every pixel's vertical), for the error map.
 ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition,
-                      const TileFrame* frame, std::int32_t zoom, double error_scale_m, int max_side_px = 640);
+                      const TileFrame* frame, std::int32_t zoom, double error_scale_m, const ZoomSurface& surface,
+                      int max_side_px = 640);
 
 }  // namespace terratiles

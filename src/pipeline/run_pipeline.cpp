@@ -10,6 +10,8 @@
 #include <memory>
 #include <numbers>
 #include <optional>
+#include <span>
+#include <tuple>
 
 #include <nlohmann/json.hpp>
 
@@ -28,7 +30,10 @@
 #include "src/pipeline/report_html.h"
 #include "src/pipeline/report_maps.h"
 #include "src/lod/grid_pyramid.h"
+#include "src/pipeline/drawn_tiles.h"
+#include "src/simplify/simplify_clusters.h"
 #include "src/tin/measure_tin.h"
+#include "src/geo/dem_on_globe.h"
 #include "tileset/implicit_tileset.h"
 #include "tileset/tileset.h"
 
@@ -90,139 +95,133 @@ void validateOptions(const BuildOptions& options) {
   }
 }
 
-// A level's vertices on the globe: geodetic for bounding regions, ECEF for the meshes,
-// unit normals in ECEF from the whole level mesh so shading is continuous across tiles.
-struct PlacedLevel {
-  std::vector<GeodeticPoint> geodetic;
-  std::vector<EcefPoint> ecef;
-  std::vector<EcefPoint> normals;
-};
-
-PlacedLevel placeLevel(const DemGrid& dem, const TinMesh& mesh, const CrsToWgs84& to_wgs84,
-                       const GeoidGrid* geoid) {
-  PlacedLevel placed;
+// Unit normals in ECEF of a level's vertices from the whole level mesh (area-weighted face
+// normals), so shading is continuous across tiles; an unused vertex gets the ellipsoid normal.
+std::vector<EcefPoint> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
   const std::size_t n = mesh.vertices.size();
-  placed.geodetic.resize(n);
-  placed.ecef.resize(n);
-  placeOnGlobe(dem, mesh.vertices, to_wgs84, geoid, placed.geodetic, placed.ecef);
-
-  placed.normals.assign(n, EcefPoint{});
+  std::vector<EcefPoint> normals(n, EcefPoint{});
   const auto& idx = mesh.triangle_indices;
   for (std::size_t t = 0; t < idx.size(); t += 3) {
-    const EcefPoint& a = placed.ecef[idx[t]];
-    const EcefPoint& b = placed.ecef[idx[t + 1]];
-    const EcefPoint& c = placed.ecef[idx[t + 2]];
+    const EcefPoint& a = ecef[idx[t]];
+    const EcefPoint& b = ecef[idx[t + 1]];
+    const EcefPoint& c = ecef[idx[t + 2]];
     const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
     const double vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
     const EcefPoint face{uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};  // area-weighted
     for (std::size_t k = 0; k < 3; ++k) {
-      EcefPoint& nrm = placed.normals[idx[t + k]];
+      EcefPoint& nrm = normals[idx[t + k]];
       nrm.x += face.x;
       nrm.y += face.y;
       nrm.z += face.z;
     }
   }
   for (std::size_t i = 0; i < n; ++i) {
-    EcefPoint& nrm = placed.normals[i];
+    EcefPoint& nrm = normals[i];
     double length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
-    if (length == 0) {  // an unused vertex: the ellipsoid normal
-      const double lat = placed.geodetic[i].lat_deg * kDegToRad;
-      const double lon = placed.geodetic[i].lon_deg * kDegToRad;
-      nrm = {std::cos(lat) * std::cos(lon), std::cos(lat) * std::sin(lon), std::sin(lat)};
-      length = 1;
+    if (length == 0) {  // an unused vertex: the direction from the Earth's centre
+      nrm = ecef[i];
+      length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+      if (length == 0) nrm = {0, 0, 1}, length = 1;
     }
     nrm.x /= length;
     nrm.y /= length;
     nrm.z /= length;
   }
-  return placed;
+  return normals;
+}
+
+// The largest side of the ECEF box of the tiles' vertices: what their quantisation must span.
+double widestTileExtent(const std::vector<PyramidTile>& tiles, std::span<const EcefPoint> ecef) {
+  double widest = 0;
+  for (const PyramidTile& tile : tiles) {
+    EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    for (std::uint32_t v : tile.triangle_indices) {
+      const EcefPoint& p = ecef[v];
+      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    widest = std::max({widest, hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  }
+  return widest;
+}
+
+// One tile's content exactly as a decoder gives it back: every vertex at its position on the
+// zoom's quantisation grids (snapped), vertices that snap to one point welded into one (the
+// pole of a geographic DEM, whose pixels are all one point) and the triangles that collapse
+// with them left out. Measured, bounded (its region) and encoded from this.
+struct DrawnContent {
+  std::vector<EcefPoint> positions;  // snapped ECEF
+  std::vector<EcefPoint> normals;
+  std::vector<GridCorner> grid;      // where each vertex sits in the DEM's grid (before snapping)
+  std::vector<std::uint32_t> triangle_indices;
+};
+
+DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
+                          std::span<const EcefPoint> normals, const DemOnGlobe& globe) {
+  DrawnContent out;
+  std::map<std::uint32_t, std::uint32_t> local_of;  // level vertex -> tile vertex
+  std::map<std::tuple<double, double, double>, std::uint32_t> at_point;
+  std::array<std::uint32_t, 3> corner{};
+  for (std::size_t i = 0; i < tile.triangle_indices.size(); ++i) {
+    const std::uint32_t v = tile.triangle_indices[i];
+    auto [it, inserted] = local_of.try_emplace(v, 0);
+    if (inserted) {
+      const EcefPoint& p = snapped[v];
+      const auto [weld, new_point] = at_point.try_emplace({p.x, p.y, p.z}, static_cast<std::uint32_t>(out.positions.size()));
+      if (new_point) {
+        const GridPoint& g = mesh.vertices[v];
+        out.positions.push_back(p);
+        out.normals.push_back(normals[v]);
+        const bool at_pole = g.row == std::round(g.row) && g.row >= 0 && g.row < globe.dem().height &&
+                             globe.poleRow(static_cast<std::int32_t>(g.row));
+        out.grid.push_back({g.col, g.row, at_pole});
+      }
+      it->second = weld->second;
+    }
+    corner[i % 3] = it->second;
+    if (i % 3 == 2 && corner[0] != corner[1] && corner[1] != corner[2] && corner[2] != corner[0]) {
+      out.triangle_indices.insert(out.triangle_indices.end(), corner.begin(), corner.end());
+    }
+  }
+  return out;
 }
 
 struct EncodedTile {
   std::vector<std::uint8_t> glb;
   Region region;
+  DrawnTileMeasure measure;
   std::size_t vertices = 0;
   int position_bits = 0;  // Draco position bits at the zoom's step
 };
 
-// The largest side of a tile's ECEF box: what its quantisation must span.
-double tileExtent(const PyramidTile& tile, const PlacedLevel& placed) {
-  EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-  for (std::uint32_t v : tile.triangle_indices) {
-    const EcefPoint& p = placed.ecef[v];
-    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-  }
-  return std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 0.0});
-}
-
-double widestTileExtent(const std::vector<PyramidTile>& tiles, const PlacedLevel& placed) {
-  double widest = 0;
-  for (const PyramidTile& tile : tiles) widest = std::max(widest, tileExtent(tile, placed));
-  return widest;
-}
-
-// One tile's content: its vertices relative to an origin on the quantisation grid, in the
-// glTF y-up frame (glTF (x, y, z) = ECEF (X, Z, -Y); 3D Tiles rotates y-up back to z-up).
-// Every position is snapped to the grid before it is made relative, so the float offsets are
-// exact and Draco gives them back bit for bit: a vertex two tiles of a zoom share decodes to
-// one position in both.
-EncodedTile encodeTile(const PyramidTile& tile, const PlacedLevel& placed, const GlbOptions& glb) {
-  EncodedTile out;
-  std::map<std::uint32_t, std::uint32_t> local_of;  // level vertex -> tile vertex
-  std::vector<std::uint32_t> level_vertex;
+// One tile's GLB: its vertices relative to an origin on the quantisation grid, in the glTF
+// y-up frame (glTF (x, y, z) = ECEF (X, Z, -Y); 3D Tiles rotates y-up back to z-up). Every
+// position is on the grid before it is made relative, so the float offsets are exact and
+// Draco gives them back bit for bit: a vertex two tiles share decodes to one position in both.
+std::vector<std::uint8_t> encodeContent(const DrawnContent& content, const GlbOptions& glb, int* position_bits) {
   GlbMesh mesh;
-  mesh.triangle_indices.reserve(tile.triangle_indices.size());
-  for (std::uint32_t v : tile.triangle_indices) {
-    auto [it, inserted] = local_of.try_emplace(v, static_cast<std::uint32_t>(level_vertex.size()));
-    if (inserted) level_vertex.push_back(v);
-    mesh.triangle_indices.push_back(it->second);
-  }
+  mesh.triangle_indices = content.triangle_indices;
   EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-  for (std::uint32_t v : level_vertex) {
-    const EcefPoint& p = placed.ecef[v];
+  for (const EcefPoint& p : content.positions) {
     lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
     hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-    const GeodeticPoint& g = placed.geodetic[v];
-    out.region.include(g.lon_deg * kDegToRad, g.lat_deg * kDegToRad, g.height_m);
   }
-  // Plain GLBs too: their float offsets are then exact as well.
   const double step = glb.position_step_m;
   auto snap = [step](double value) { return snapToStep(value, step); };
   const EcefPoint origin{snap((lo.x + hi.x) / 2), snap((lo.y + hi.y) / 2), snap((lo.z + hi.z) / 2)};
   mesh.translation = {origin.x, origin.z, -origin.y};
-  mesh.positions.reserve(level_vertex.size() * 3);
-  mesh.normals.reserve(level_vertex.size() * 3);
-  for (std::uint32_t v : level_vertex) {
-    const EcefPoint& p = placed.ecef[v];
-    const EcefPoint& n = placed.normals[v];
-    mesh.positions.insert(mesh.positions.end(), {static_cast<float>(snap(p.x) - origin.x),
-                                                 static_cast<float>(snap(p.z) - origin.z),
-                                                 static_cast<float>(-(snap(p.y) - origin.y))});
-    mesh.normals.insert(mesh.normals.end(),
-                        {static_cast<float>(n.x), static_cast<float>(n.z), static_cast<float>(-n.y)});
+  mesh.positions.reserve(content.positions.size() * 3);
+  mesh.normals.reserve(content.positions.size() * 3);
+  for (std::size_t v = 0; v < content.positions.size(); ++v) {
+    const EcefPoint& p = content.positions[v];
+    const EcefPoint& n = content.normals[v];
+    mesh.positions.insert(mesh.positions.end(), {static_cast<float>(p.x - origin.x), static_cast<float>(p.z - origin.z),
+                                                 static_cast<float>(-(p.y - origin.y))});
+    mesh.normals.insert(mesh.normals.end(), {static_cast<float>(n.x), static_cast<float>(n.z), static_cast<float>(-n.y)});
   }
-  out.vertices = level_vertex.size();
   EncodedGlb encoded = encodeGlb(mesh, glb);
-  out.glb = std::move(encoded.bytes);
-  out.position_bits = encoded.position_bits;
-  // The region must hold the decoded content: grow it by the quantisation step (decoded
-  // positions are within half a step per axis, sqrt(3)/2 step in all).
-  const double grow_m = encoded.position_step_m;
-  if (grow_m > 0) {
-    constexpr double kMinimumRadius_m = 6.3e6;  // below any WGS84 radius of curvature
-    const double grow_lat = grow_m / kMinimumRadius_m;
-    const double widest = std::max(std::fabs(out.region.south_rad), std::fabs(out.region.north_rad));
-    const double grow_lon = grow_lat / std::max(std::cos(std::min(widest, 1.5707)), 1e-6);
-    Region& r = out.region;
-    r.west_rad = std::max(r.west_rad - grow_lon, -std::numbers::pi);
-    r.east_rad = std::min(r.east_rad + grow_lon, std::numbers::pi);
-    r.south_rad = std::max(r.south_rad - grow_lat, -std::numbers::pi / 2);
-    r.north_rad = std::min(r.north_rad + grow_lat, std::numbers::pi / 2);
-    r.min_height_m -= grow_m;
-    r.max_height_m += grow_m;
-  }
-  return out;
+  *position_bits = encoded.position_bits;
+  return std::move(encoded.bytes);
 }
 
 // Attaches every node under its parent in `nodes`, finest zoom first, creating content-less
@@ -263,65 +262,50 @@ struct ZoomContent {
   std::int32_t step = 0;      // grid: pixels between samples
   std::size_t clusters = 0;   // clusters: the level's own clusters
   const TinMesh* mesh = nullptr;
+  // The level's vertices on the globe (DemOnGlobe::place).
+  std::vector<EcefPoint> ecef;
+  // Clusters: per vertex, its index in the next coarser zoom's mesh, or kRemovedVertex (the
+  // locked vertices a tile outline runs along live on); nullptr on the coarsest zoom and for
+  // the grid pyramid.
+  const std::vector<std::uint32_t>* index_in_coarser = nullptr;
   // For the report's map: the clusters its tiles are made of (the finer level's, carried
   // over; on the finest level its own); nullptr for the grid pyramid.
   const FacePartition* map_clusters = nullptr;
   std::vector<PyramidTile> tiles;
-  double max_error_m = 0;
-  double rms_error_m = 0;
 };
 
-// Per tile: max and RMS |content - DEM| over the valid pixels its triangles cover (a pixel on
-// an edge between two of its triangles counts twice in the RMS).
-// finer_surface: the next finer zoom's height at every pixel (NaN where it has none), or
-// empty.
-void measureTiles(const DemGrid& dem, const TinMesh& mesh, std::vector<PyramidTile>& tiles,
-                  const std::vector<float>& finer_surface) {
-  tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
-    PyramidTile& tile = tiles[i];
-    double max_error = 0, sum_squares = 0, finer_difference = 0;
-    std::size_t count = 0;
+// Per vertex of a zoom's mesh: whether it is on the outline of some tile of the zoom (an
+// edge of one of the tile's triangles that no other of its triangles has).
+std::vector<std::uint8_t> outlineVertices(const ZoomContent& zoom) {
+  std::vector<std::uint8_t> outline(zoom.mesh->vertices.size(), 0);
+  std::vector<std::uint64_t> edges;
+  for (const PyramidTile& tile : zoom.tiles) {
     const auto& idx = tile.triangle_indices;
+    edges.clear();
     for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-      forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
-                          [&](std::size_t pixel, double surface_m) {
-                            const float h = dem.heights_m[pixel];
-                            if (std::isnan(h)) return true;
-                            if (!finer_surface.empty() && !std::isnan(finer_surface[pixel])) {
-                              finer_difference = std::max(finer_difference, std::fabs(surface_m - finer_surface[pixel]));
-                            }
-                            const double error = std::fabs(surface_m - h);
-                            max_error = std::max(max_error, error);
-                            sum_squares += error * error;
-                            ++count;
-                            return true;
-                          });
+      for (std::size_t k = 0; k < 3; ++k) {
+        const std::uint32_t a = idx[t + k], b = idx[t + (k + 1) % 3];
+        edges.push_back((static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b));
+      }
     }
-    tile.max_error_m = max_error;
-    tile.rms_error_m = count ? std::sqrt(sum_squares / static_cast<double>(count)) : 0;
-    tile.measured_pixels = count;
-    tile.finer_difference_m = finer_difference;
-  });
-}
-
-// A level's height at every pixel centre it covers (NaN elsewhere).
-std::vector<float> levelSurface(const DemGrid& dem, const TinMesh& mesh) {
-  std::vector<float> surface(dem.pixelCount(), std::nanf(""));
-  const auto& idx = mesh.triangle_indices;
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
-                        [&](std::size_t pixel, double surface_m) {
-                          surface[pixel] = static_cast<float>(surface_m);
-                          return true;
-                        });
+    std::sort(edges.begin(), edges.end());
+    for (std::size_t i = 0; i < edges.size();) {
+      std::size_t j = i;
+      while (j < edges.size() && edges[j] == edges[i]) ++j;
+      if (j - i == 1) {
+        outline[edges[i] >> 32] = 1;
+        outline[edges[i] & 0xffffffffu] = 1;
+      }
+      i = j;
+    }
   }
-  return surface;
+  return outline;
 }
 
 }  // namespace
 
-ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std::string& constraints_path,
-                              Progress& progress) {
+ConstrainedTin buildFinestTin(const DemGrid& dem, const DemOnGlobe* globe, double max_error_m,
+                              const std::string& constraints_path, Progress& progress) {
   BreakLines lines;
   if (!constraints_path.empty()) {
     progress.beginStage("reading break lines", 0);
@@ -336,6 +320,7 @@ ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std:
   }
   TinOptions options;
   options.max_error_m = max_error_m;
+  options.globe = globe;
   ConstrainedTin tin = buildConstrainedTin(dem, options, lines.segments, progress);
   if (!constraints_path.empty()) {
     progress.note("break lines from " + constraints_path + ": " + std::to_string(lines.features) + " features, " +
@@ -361,6 +346,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     geoid = readGeoidGrid(options.geoid_path.empty() ? kDefaultGeoidPath : options.geoid_path);
   }
   progress.endStage();
+  // Every pixel's DEM point on the globe and its vertical: every error is measured on the
+  // surface a renderer draws, along these.
+  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
   progress.note("placement: " + to_wgs84.pathDescription());
   for (const std::string& warning : to_wgs84.warnings()) progress.note("warning: " + warning);
   progress.note(geoid ? "heights: orthometric, geoid " + geoid->name
@@ -403,11 +391,17 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
                                         "block of valid (not nodata) pixels");
     }
     for (PyramidLevel& level : pyramid.levels) {
-      zooms.push_back({level.zoom, level.step, 0, &level.mesh, nullptr, std::move(level.tiles), level.max_error_m,
-                       level.rms_error_m});
+      ZoomContent content;
+      content.zoom = level.zoom;
+      content.step = level.step;
+      content.mesh = &level.mesh;
+      content.ecef.resize(level.mesh.vertices.size());
+      globe.place(level.mesh.vertices, {}, content.ecef);
+      content.tiles = std::move(level.tiles);
+      zooms.push_back(std::move(content));
     }
   } else {
-    ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress);
+    ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
     frame = std::make_unique<TileFrame>(options.scheme, dem);
     const ZoomPlan plan =
         planZooms(*frame, finest.mesh, options.tile_triangles, options.max_zoom, options.clusters_per_tile);
@@ -415,6 +409,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
                   std::string(tileSchemeName(options.scheme)) + "), clusters assigned by " +
                   std::string(assignmentName(options.assignment)));
     LevelOptions level_options;
+    level_options.globe = &globe;
     level_options.clusters_per_level = plan.clusters_per_level;
     level_options.level_ratio = options.level_ratio;
     if (options.level_error_growth > 0) {
@@ -432,22 +427,23 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     } else {
       levels.emplace_back();
       levels[0].mesh = std::move(finest.mesh);
-      levels[0].error = measureTin(dem, levels[0].mesh);
+      levels[0].vertex_ecef.resize(levels[0].mesh.vertices.size());
+      globe.place(levels[0].mesh.vertices, {}, levels[0].vertex_ecef);
+      levels[0].error = measureTin(globe, levels[0].mesh, levels[0].vertex_ecef);
     }
     progress.beginStage("assigning clusters to tiles", levels.size());
     std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;
-    std::vector<float> finer_surface;
     for (std::size_t l = 0; l < levels.size(); ++l) {
       const auto zoom = static_cast<std::int32_t>(plan.max_zoom - static_cast<std::int32_t>(l));
       ZoomContent content;
       content.zoom = zoom;
       content.clusters = static_cast<std::size_t>(levels[l].partition.cluster_count);
       content.mesh = &levels[l].mesh;
+      content.ecef = std::move(levels[l].vertex_ecef);
+      if (l + 1 < levels.size()) content.index_in_coarser = &levels[l].index_in_coarser;
       content.map_clusters = !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
                              : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
                                                                                   : nullptr;
-      content.max_error_m = levels[l].error.max_error_m;
-      content.rms_error_m = levels[l].error.rms_error_m;
       for (TileFaces& tile : assignClusters(*frame, levels[l], zoom, options.assignment, finer_cluster_tiles,
                                             own_cluster_tiles)) {
         PyramidTile pyramid_tile;
@@ -455,8 +451,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         pyramid_tile.triangle_indices = std::move(tile.triangle_indices);
         content.tiles.push_back(std::move(pyramid_tile));
       }
-      measureTiles(dem, levels[l].mesh, content.tiles, finer_surface);
-      if (l + 1 < levels.size()) finer_surface = levelSurface(dem, levels[l].mesh);
       finer_cluster_tiles = std::move(own_cluster_tiles);
       zooms.push_back(std::move(content));
       progress.advance();
@@ -477,24 +471,77 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   double base_step_m = options.position_step_m;
   if (options.draco_position_bits > 0) {
     const ZoomContent& finest = zooms.back();
-    const PlacedLevel placed = placeLevel(dem, *finest.mesh, to_wgs84, geoid ? &*geoid : nullptr);
     base_step_m =
-        sharedPositionStep(widestTileExtent(finest.tiles, placed), std::ldexp(1.0, -30), options.draco_position_bits);
+        sharedPositionStep(widestTileExtent(finest.tiles, finest.ecef), std::ldexp(1.0, -30), options.draco_position_bits);
   }
   summary.position_step_m = base_step_m;
+
+  // The grids, coarsest zoom first. A zoom's own grid is the base step, unless its widest
+  // tile needs more than the 2^23 steps Draco quantises exactly (tiles wider than about
+  // 65 km at 1/128 m): then a power-of-two multiple. A vertex on a tile outline at this zoom
+  // and at the next coarser one (a locked vertex the two zooms' outlines share) is snapped to
+  // the coarser of the two grids in both, and so on down the chain of outlines: every vertex
+  // two touching tiles share decodes to the same position in both, whatever grid each zoom
+  // uses. Every error is measured after this snap, on what the GLBs decode to.
+  const std::size_t zoom_count = zooms.size();
+  std::vector<double> zoom_step_m(zoom_count);
+  std::vector<std::vector<double>> vertex_step_m(zoom_count);
+  {
+    std::vector<std::uint8_t> coarser_outline;
+    for (std::size_t k = 0; k < zoom_count; ++k) {
+      const ZoomContent& zoom = zooms[k];
+      std::vector<std::uint8_t> outline = outlineVertices(zoom);
+      std::vector<double> inherited(zoom.mesh->vertices.size(), 0.0);
+      double largest_inherited = 0;
+      if (k > 0) {
+        const ZoomContent& coarser = zooms[k - 1];
+        const std::vector<std::uint32_t>* map = zoom.index_in_coarser;
+        for (std::size_t v = 0; map && v < inherited.size(); ++v) {
+          const std::uint32_t w = (*map)[v];
+          if (!outline[v] || w == kRemovedVertex || !coarser_outline[w]) continue;
+          const GridPoint& here = zoom.mesh->vertices[v];
+          const GridPoint& there = coarser.mesh->vertices[w];
+          if (here.col != there.col || here.row != there.row || here.height_m != there.height_m) continue;
+          inherited[v] = vertex_step_m[k - 1][w];
+          largest_inherited = std::max(largest_inherited, inherited[v]);
+        }
+      }
+      // A coarser snap moves a vertex by up to half that step: room for it in the extent.
+      zoom_step_m[k] =
+          sharedPositionStep(widestTileExtent(zoom.tiles, zoom.ecef) + 2 * largest_inherited, base_step_m, kMaxExactPositionBits);
+      vertex_step_m[k].resize(inherited.size());
+      for (std::size_t v = 0; v < inherited.size(); ++v) vertex_step_m[k][v] = std::max(zoom_step_m[k], inherited[v]);
+      coarser_outline = std::move(outline);
+    }
+  }
 
   std::size_t total_tiles = 0;
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
   progress.beginStage("writing tiles", total_tiles);
   std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
   double widest_step_m = 0;
-  for (const ZoomContent& level : zooms) {
-    const PlacedLevel placed = placeLevel(dem, *level.mesh, to_wgs84, geoid ? &*geoid : nullptr);
-    // One grid per zoom: the base step, unless the zoom's widest tile needs more than the
-    // 2^23 steps Draco quantises exactly (tiles wider than about 65 km at 1/128 m).
-    glb.position_step_m = sharedPositionStep(widestTileExtent(level.tiles, placed), base_step_m, kMaxExactPositionBits);
+  std::vector<ZoomSummary> zoom_summaries(zoom_count);
+  std::vector<ZoomMaps> maps(options.report ? zoom_count : 0);
+  // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
+  // drawn surface (where a viewer draws both), measured on that zoom's surface.
+  ZoomSurface finer_surface;
+  for (std::size_t k = zoom_count; k-- > 0;) {
+    const ZoomContent& level = zooms[k];
+    std::vector<EcefPoint> snapped(level.ecef.size());
+    double largest_step_m = 0;
+    for (std::size_t v = 0; v < snapped.size(); ++v) {
+      const double step = vertex_step_m[k][v];
+      largest_step_m = std::max(largest_step_m, step);
+      snapped[v] = {snapToStep(level.ecef[v].x, step), snapToStep(level.ecef[v].y, step), snapToStep(level.ecef[v].z, step)};
+    }
+    const std::vector<EcefPoint> normals = levelNormals(*level.mesh, level.ecef);
+    glb.position_step_m = zoom_step_m[k];
     widest_step_m = std::max(widest_step_m, glb.position_step_m);
-    ZoomSummary zoom_summary;
+    // The grid positions measured from are those before the snap: a vertex moves by up to
+    // sqrt(3)/2 of its step.
+    const double shift_m = 0.87 * largest_step_m;
+    ZoomSurface surface(dem.pixelCount());
+    ZoomSummary& zoom_summary = zoom_summaries[k];
     zoom_summary.position_step_m = glb.position_step_m;
     zoom_summary.zoom = level.zoom;
     zoom_summary.step_pixels = level.step;
@@ -503,8 +550,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     zoom_summary.vertices = level.mesh->vertices.size();
     zoom_summary.triangles = level.mesh->triangleCount();
     for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
-    zoom_summary.max_error_m = level.max_error_m;
-    zoom_summary.rms_error_m = level.rms_error_m;
 
     // Encode in parallel batches into pre-sized slots (output identical for any thread
     // count), write and report progress from this thread.
@@ -513,30 +558,55 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       const std::size_t end = std::min(level.tiles.size(), begin + kBatch);
       std::vector<EncodedTile> encoded(end - begin);
       tbb::parallel_for(begin, end, [&](std::size_t i) {
-        encoded[i - begin] = encodeTile(level.tiles[i], placed, glb);
+        const DrawnContent content = drawnContent(level.tiles[i], *level.mesh, snapped, normals, globe);
+        EncodedTile& out = encoded[i - begin];
+        out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m,
+                                       finer_surface.empty() ? nullptr : &finer_surface, &surface);
+        out.region = drawnRegion(content.positions, content.triangle_indices);
+        out.vertices = content.positions.size();
+        out.glb = encodeContent(content, glb, &out.position_bits);
       });
       for (std::size_t i = begin; i < end; ++i) {
         const PyramidTile& tile = level.tiles[i];
+        const EncodedTile& tile_out = encoded[i - begin];
         TileNode node;
         node.key = tile.key;
         node.content_uri = contentUri(tile.key, options.implicit_tiling);
-        node.region = encoded[i - begin].region;
-        // Measured: against the DEM and against the next finer zoom where both are drawn.
-        node.geometric_error_m = std::max(tile.max_error_m, tile.finer_difference_m);
-        zoom_summary.bytes += output.writeFile(node.content_uri, encoded[i - begin].glb);
-        zoom_summary.position_bits = std::max(zoom_summary.position_bits, encoded[i - begin].position_bits);
+        node.region = tile_out.region;
+        // Measured on the decoded content: against the DEM and against the next finer zoom
+        // where both are drawn.
+        node.geometric_error_m = std::max(tile_out.measure.max_error_m, tile_out.measure.finer_difference_m);
+        zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile_out.measure.max_error_m);
+        zoom_summary.bytes += output.writeFile(node.content_uri, tile_out.glb);
+        zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile_out.position_bits);
         nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
         progress.advance();
       }
     }
+    // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
+    double sum_squares = 0;
+    std::size_t drawn_pixels = 0;
+    for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
+      if (!surface.drawn(p)) continue;
+      sum_squares += surface.error(p) * surface.error(p);
+      ++drawn_pixels;
+    }
+    zoom_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
+    if (options.report) {
+      maps[k] = drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, zoom_summary.max_error_m,
+                             surface);
+    }
+    finer_surface = std::move(surface);
+  }
+  progress.endStage();
+  for (const ZoomSummary& zoom_summary : zoom_summaries) {
     summary.tiles += zoom_summary.tiles;
     summary.triangles += zoom_summary.triangles;
     summary.bytes += zoom_summary.bytes;
     summary.tile_bytes += zoom_summary.bytes;
-    if (level.zoom < max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, level.max_error_m);
+    if (zoom_summary.zoom < max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, zoom_summary.max_error_m);
     summary.zooms.push_back(zoom_summary);
   }
-  progress.endStage();
 
   Tileset tileset;
   tileset.generator = glb.generator;
@@ -619,13 +689,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   // The report: maps per zoom, the check of what was written, then report.json and .html.
   if (options.report) {
-    std::vector<ZoomMaps> maps;
-    progress.beginStage("drawing report maps", zooms.size());
-    for (const ZoomContent& level : zooms) {
-      maps.push_back(drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, level.max_error_m));
-      progress.advance();
-    }
-    progress.endStage();
     // The levels are written and drawn: free them before the check decodes every tile.
     zooms = {};
     levels = {};

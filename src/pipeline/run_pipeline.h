@@ -14,6 +14,8 @@
 
 namespace terratiles {
 
+class DemOnGlobe;
+
 enum class HeightReference {
   Orthometric,  // heights above a geoid (LN02, NAP, EGM96...): add the geoid undulation
   Ellipsoidal,  // heights already above the WGS84 ellipsoid: use as they are
@@ -111,9 +113,10 @@ struct BuildSummary {
 
 BuildSummary runPipeline(const BuildOptions& options, Progress& progress);
 
-// The finest TIN (greedy insertion to max_error_m) with the break lines of constraints_path
-// (an OGR vector file; empty: none) as constrained edges; notes what was read on `progress`.
-ConstrainedTin buildFinestTin(const DemGrid& dem, double max_error_m, const std::string& constraints_path,
-                              Progress& progress);
+// The finest TIN (greedy insertion to max_error_m, measured on the globe when `globe` is not
+// null) with the break lines of constraints_path (an OGR vector file; empty: none) as
+// constrained edges; notes what was read on `progress`.
+ConstrainedTin buildFinestTin(const DemGrid& dem, const DemOnGlobe* globe, double max_error_m,
+                              const std::string& constraints_path, Progress& progress);
 
 }  // namespace terratiles

@@ -20,6 +20,7 @@
 #include <utility>
 
 #include "src/base/error.h"
+#include "src/geo/dem_on_globe.h"
 #include "src/tin/measure_tin.h"
 
 namespace terratiles {
@@ -152,13 +153,24 @@ bool isUpwardTriangle(const GridPoint& a, const GridPoint& b, const GridPoint& c
 }
 
 // True when some valid DEM pixel the triangle covers is more than budget_m away from it. Same
-// pixel inclusion and interpolation as measureTin, so measureTin confirms the budget.
+// pixel inclusion and measure as measureTin (in the grid frame, or on the globe with the
+// corners' ECEF positions), so measureTin confirms the budget.
 bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                    double budget_m) {
   bool exceeds = false;
   forEachCoveredPixel(dem, a, b, c, [&](std::size_t i, double surface_m) {
     const float h = dem.heights_m[i];
     exceeds = !std::isnan(h) && std::fabs(surface_m - h) > budget_m;
+    return !exceeds;
+  });
+  return exceeds;
+}
+
+bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m) {
+  bool exceeds = false;
+  forEachCoveredPixelOnGlobe(globe, a, b, c, pa, pb, pc, [&](std::size_t i, double offset_m) {
+    exceeds = !std::isnan(globe.dem().heights_m[i]) && !(std::fabs(offset_m) <= budget_m);
     return !exceeds;
   });
   return exceeds;
@@ -189,6 +201,10 @@ struct ClusterState {
   const SimplifyOptions* options = nullptr;
   std::vector<std::uint32_t> identity;  // per submesh vertex: the input vertex it is
   std::vector<GridPoint> grid;          // per submesh vertex: its position as it will be output
+  std::vector<EcefPoint> ecef;          // on the globe: per submesh vertex, grid placed
+  // On the globe: the last placement the filter placed (a collapse follows its filter).
+  GridPoint filtered_grid;
+  EcefPoint filtered_ecef;
   std::vector<Quadric> quadrics;        // per submesh vertex
   std::size_t refused_for_error = 0;
   std::size_t refused_for_flip = 0;
@@ -198,6 +214,18 @@ struct ClusterState {
 
   GridPoint toGrid(const Point3& p) const {
     return {p.x() / options->metres_per_col, -p.y() / options->metres_per_row, p.z()};
+  }
+  // ECEF of a vertex at `placed` by collapsing profile's edge: an end's own when it is that
+  // end's position, else placed on the globe (exactly as the pipeline will place it).
+  template <typename Profile>
+  EcefPoint placedEcef(const Profile& profile, const Point3& placement, const GridPoint& placed) {
+    if (sameBits(placement, profile.p0())) return ecef[profile.v0()];
+    if (sameBits(placement, profile.p1())) return ecef[profile.v1()];
+    if (placed.col != filtered_grid.col || placed.row != filtered_grid.row || placed.height_m != filtered_grid.height_m) {
+      filtered_grid = placed;
+      filtered_ecef = options->globe->place(placed);
+    }
+    return filtered_ecef;
   }
 };
 
@@ -382,8 +410,12 @@ class TerrainFilter {
     }
     const double budget_m = state_->options->max_error_m;
     if (std::isfinite(budget_m)) {
+      const DemOnGlobe* globe = state_->options->globe;
+      const EcefPoint placed_ecef = globe ? state_->placedEcef(profile, *placement, placed) : EcefPoint{};
       const bool within = allNewTriangles(profile, [&](VertexIndex a, VertexIndex c) {
-        return !exceedsBudget(*state_->dem, state_->grid[a], placed, state_->grid[c], budget_m);
+        return globe ? !exceedsBudgetOnGlobe(*globe, state_->grid[a], placed, state_->grid[c], state_->ecef[a],
+                                             placed_ecef, state_->ecef[c], budget_m)
+                     : !exceedsBudget(*state_->dem, state_->grid[a], placed, state_->grid[c], budget_m);
       });
       if (!within) {
         ++state_->refused_for_error;
@@ -420,14 +452,23 @@ class TrackingVisitor : public SMS::Edge_collapse_visitor_base<Mesh> {
     const Point3 placement = state_->pending ? state_->pending_placement : p0;
     const Point3 p1 = state_->pending ? state_->pending_p1 : p0;
     state_->pending = false;
+    const bool globe = state_->options->globe != nullptr;
     if (sameBits(placement, p0)) {
       state_->identity[kept] = state_->identity[profile.v0()];
       state_->grid[kept] = state_->grid[profile.v0()];
+      if (globe) state_->ecef[kept] = state_->ecef[profile.v0()];
     } else if (sameBits(placement, p1)) {
       state_->identity[kept] = state_->identity[profile.v1()];
       state_->grid[kept] = state_->grid[profile.v1()];
+      if (globe) state_->ecef[kept] = state_->ecef[profile.v1()];
     } else {
       state_->grid[kept] = state_->toGrid(placement);  // moved: keeps the identity CGAL kept
+      if (globe) {
+        const GridPoint& g = state_->grid[kept];
+        const bool filtered = g.col == state_->filtered_grid.col && g.row == state_->filtered_grid.row &&
+                              g.height_m == state_->filtered_grid.height_m;
+        state_->ecef[kept] = filtered ? state_->filtered_ecef : state_->options->globe->place(g);
+      }
     }
   }
 
@@ -481,9 +522,14 @@ ClusterOutput simplifyOneCluster(const LevelInput& in, std::int32_t cluster,
                   static_cast<Mesh::size_type>(2 * face_count + 2),
                   static_cast<Mesh::size_type>(face_count));
   state.grid.reserve(state.identity.size());
+  if (options.globe) {
+    state.ecef.reserve(state.identity.size());
+    state.filtered_grid = {std::nan(""), std::nan(""), std::nan("")};
+  }
   for (const std::uint32_t v : state.identity) {
     const GridPoint& g = mesh.vertices[v];
     state.grid.push_back(g);
+    if (options.globe) state.ecef.push_back(options.vertex_ecef[v]);
     submesh.add_vertex(Point3(g.col * options.metres_per_col, -g.row * options.metres_per_row, g.height_m));
   }
   for (std::size_t t = 0; t < face_count; ++t) {
@@ -609,6 +655,11 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
   using namespace detail;
   validateOptions(options);
   validateMesh(mesh, cluster_of_face, cluster_count);
+  if (options.globe && options.vertex_ecef.size() != mesh.vertices.size()) {
+    throw Error(ErrorCode::Usage, "simplifyClusters: " + std::to_string(options.vertex_ecef.size()) +
+                                      " vertex positions on the globe for " + std::to_string(mesh.vertices.size()) +
+                                      " vertices; expected one per vertex");
+  }
   const InputTopology topology = buildTopology(mesh);
 
   std::vector<std::uint64_t> constrained_keys;

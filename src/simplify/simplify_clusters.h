@@ -21,8 +21,11 @@
 //       higher vertex, which turns a quantisation step into a height jump as large as the
 //       wall (measured: 490 m on ETOPO5 with the 16 m step of a quarter-world tile), or
 //   (b) one of the triangles it creates is more than options.max_error_m away from a valid
-//       DEM pixel it covers (pixel centres at whole (col, row), linear interpolation, the
-//       inclusion rule of measureTin; nodata skipped; not tested when the budget is infinite).
+//       DEM pixel it covers (pixel centres at whole (col, row), the inclusion rule and the
+//       measure of measureTin: on the globe (options.globe), the triangle as drawn, straight
+//       in ECEF, along each pixel's vertical, so long edges over flat ground are refused where
+//       their sag would break the budget; without one, linear interpolation; nodata skipped;
+//       not tested when the budget is infinite).
 // So with a finite budget, every triangle the simplification creates is within the budget
 // of the DEM (triangles it does not touch keep the error they had).
 //
@@ -56,12 +59,16 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 
 #include "src/dem/dem_grid.h"
+#include "src/geo/crs_transform.h"
 #include "src/tin/tin_mesh.h"
 
 namespace terratiles {
+
+class DemOnGlobe;
 
 struct SimplifyOptions {
   // Each cluster stops when its edge count falls below this fraction of its initial count
@@ -75,6 +82,11 @@ struct SimplifyOptions {
   // pixel size times the metres per degree at the DEM's latitude.
   double metres_per_col = 1;
   double metres_per_row = 1;
+  // The budget on the globe (the DEM's DemOnGlobe) with every input vertex's ECEF position
+  // (globe->place of mesh.vertices); a vertex a collapse moves is placed by globe->place.
+  // nullptr: the budget is measured in the grid frame.
+  const DemOnGlobe* globe = nullptr;
+  std::span<const EcefPoint> vertex_ecef;
 };
 
 struct ClusterSimplification {

@@ -13,6 +13,8 @@
 #include <tbb/parallel_for.h>
 
 #include "src/base/error.h"
+#include "src/geo/dem_on_globe.h"
+#include "src/geo/drawn_triangle.h"
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -168,6 +170,115 @@ __extension__ typedef __int128 Int128;
 constexpr std::int32_t kNone = -1;
 // Triangles narrower than this many pixels are scanned over their bounding box.
 constexpr std::int32_t kNarrowTriangle = 16;
+// The error of a triangle whose plane runs along a pixel's vertical: above any bound.
+constexpr double kWallError = 1e9;
+
+// ---- Exact errors on the globe (DemOnGlobe), vectorised like the scans above ---------------
+// The error of a drawn triangle at pixel i: |DrawnTriangle::offset| of the pixel's DEM point,
+// computed with the same operations in the same order (so the scalar and vector forms agree
+// bit for bit, and with measureTin), capped at kWallError (also where the offset is NaN).
+inline double exactErrorAt(const DemOnGlobe& globe, const DrawnTriangle& drawn, std::size_t i) {
+  const double error = std::fabs(drawn.offset(globe.point(i), globe.up(i)));
+  return error < kWallError ? error : kWallError;
+}
+
+#if defined(__x86_64__)
+// Four pixels' errors from index i on (lane k is pixel i + k).
+__attribute__((target("avx2"))) inline __m256d exactErrors4(const DemOnGlobe& globe, const DrawnTriangle& drawn,
+                                                            std::size_t i) {
+  const __m256d px = _mm256_loadu_pd(globe.pointX() + i), py = _mm256_loadu_pd(globe.pointY() + i),
+                pz = _mm256_loadu_pd(globe.pointZ() + i);
+  const __m256d ux = _mm256_cvtps_pd(_mm_loadu_ps(globe.upX() + i)), uy = _mm256_cvtps_pd(_mm_loadu_ps(globe.upY() + i)),
+                uz = _mm256_cvtps_pd(_mm_loadu_ps(globe.upZ() + i));
+  const __m256d nx = _mm256_set1_pd(drawn.normal[0]), ny = _mm256_set1_pd(drawn.normal[1]),
+                nz = _mm256_set1_pd(drawn.normal[2]);
+  const __m256d along =
+      _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, ux), _mm256_mul_pd(ny, uy)), _mm256_mul_pd(nz, uz));
+  const __m256d dx = _mm256_sub_pd(_mm256_set1_pd(drawn.a.x), px), dy = _mm256_sub_pd(_mm256_set1_pd(drawn.a.y), py),
+                dz = _mm256_sub_pd(_mm256_set1_pd(drawn.a.z), pz);
+  const __m256d across =
+      _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, dx), _mm256_mul_pd(ny, dy)), _mm256_mul_pd(nz, dz));
+  const __m256d error = _mm256_andnot_pd(_mm256_set1_pd(-0.0), _mm256_div_pd(across, along));
+  // min(NaN, cap) is the cap: vminpd returns its second operand when either is NaN.
+  return _mm256_min_pd(error, _mm256_set1_pd(kWallError));
+}
+
+// The largest exact error over pixels [x0, x1] of the row starting at pixel index row_start.
+__attribute__((target("avx2"))) double rowMaxExactAvx2(const DemOnGlobe& globe, const DrawnTriangle& drawn,
+                                                       std::size_t row_start, std::int64_t x0, std::int64_t x1) {
+  std::int64_t x = x0;
+  __m256d vmax = _mm256_setzero_pd();
+  for (; x + 3 <= x1; x += 4) {
+    vmax = _mm256_max_pd(vmax, exactErrors4(globe, drawn, row_start + static_cast<std::size_t>(x)));
+  }
+  const __m128d half = _mm_max_pd(_mm256_castpd256_pd128(vmax), _mm256_extractf128_pd(vmax, 1));
+  double row_max = std::max(_mm_cvtsd_f64(half), _mm_cvtsd_f64(_mm_unpackhi_pd(half, half)));
+  for (; x <= x1; ++x) row_max = std::max(row_max, exactErrorAt(globe, drawn, row_start + static_cast<std::size_t>(x)));
+  return row_max;
+}
+
+// boxWorstPixelInsideAvx2 with exact errors: the worst pixel inside the triangle over the box
+// (the first in row-major order on ties); false when no pixel of the box is inside. A row's
+// last step may read up to three pixels past x_last (never chosen), so past the raster's end
+// on its last row: DemOnGlobe's arrays hold kDemOnGlobePadding pixels more for that.
+__attribute__((target("avx2"))) bool boxWorstPixelExactAvx2(const DemOnGlobe& globe, const DrawnTriangle& drawn,
+                                                           std::int32_t width, std::int32_t x_first, std::int32_t x_last,
+                                                           std::int32_t y_first, std::int32_t y_last,
+                                                           const std::int64_t w_first[3], const std::int64_t alpha[3],
+                                                           const std::int64_t beta_step[3], double* worst_error,
+                                                           std::int32_t* worst_x, std::int32_t* worst_y) {
+  const __m256d zero = _mm256_setzero_pd(), outside = _mm256_set1_pd(-1.0), four = _mm256_set1_pd(4.0);
+  const __m256d lane = _mm256_set_pd(3, 2, 1, 0);
+  const __m256d last_x = _mm256_set1_pd(static_cast<double>(x_last));
+  __m256d step[3], row_start[3];
+  for (int k = 0; k < 3; ++k) {
+    step[k] = _mm256_set1_pd(4.0 * static_cast<double>(alpha[k]));
+    row_start[k] = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(w_first[k])),
+                                 _mm256_mul_pd(lane, _mm256_set1_pd(static_cast<double>(alpha[k]))));
+  }
+  const __m256d first_x = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(x_first)), lane);
+  __m256d best = outside, best_position = zero;
+  for (std::int32_t y = y_first; y <= y_last; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(width);
+    const __m256d row_position = _mm256_set1_pd(static_cast<double>(row));
+    __m256d vx = first_x, w0 = row_start[0], w1 = row_start[1], w2 = row_start[2];
+    for (std::int32_t x = x_first; x <= x_last; x += 4) {
+      const __m256d error = exactErrors4(globe, drawn, row + static_cast<std::size_t>(x));
+      const __m256d inside = _mm256_and_pd(
+          _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(w0, zero, _CMP_GE_OQ), _mm256_cmp_pd(w1, zero, _CMP_GE_OQ)),
+                        _mm256_cmp_pd(w2, zero, _CMP_GE_OQ)),
+          _mm256_cmp_pd(vx, last_x, _CMP_LE_OQ));
+      const __m256d better = _mm256_and_pd(inside, _mm256_cmp_pd(error, best, _CMP_GT_OQ));
+      best = _mm256_blendv_pd(best, error, better);
+      best_position = _mm256_blendv_pd(best_position, _mm256_add_pd(row_position, vx), better);
+      vx = _mm256_add_pd(vx, four);
+      w0 = _mm256_add_pd(w0, step[0]);
+      w1 = _mm256_add_pd(w1, step[1]);
+      w2 = _mm256_add_pd(w2, step[2]);
+    }
+    for (int k = 0; k < 3; ++k) {
+      row_start[k] = _mm256_add_pd(row_start[k], _mm256_set1_pd(static_cast<double>(beta_step[k])));
+    }
+  }
+  alignas(32) double lane_best[4], lane_position[4];
+  _mm256_store_pd(lane_best, best);
+  _mm256_store_pd(lane_position, best_position);
+  int winner = 0;
+  for (int i = 1; i < 4; ++i) {
+    if (lane_best[i] > lane_best[winner] ||
+        (lane_best[i] == lane_best[winner] && lane_position[i] < lane_position[winner])) {
+      winner = i;
+    }
+  }
+  if (lane_best[winner] < 0) return false;
+  const auto position = static_cast<std::int64_t>(lane_position[winner]);
+  *worst_error = lane_best[winner];
+  *worst_y = static_cast<std::int32_t>(position / width);
+  *worst_x = static_cast<std::int32_t>(position % width);
+  return true;
+}
+#endif
+
 
 inline std::int32_t nextHalfedge(std::int32_t e) { return e % 3 == 2 ? e - 2 : e + 1; }
 inline std::int32_t prevHalfedge(std::int32_t e) { return e % 3 == 0 ? e + 2 : e - 1; }
@@ -214,6 +325,10 @@ struct WindowMesh {
   std::size_t constrained_edges_dropped = 0;
   std::size_t segments_bent = 0;
   std::size_t segments_bent_to_end = 0;
+  // On the globe: pixels of the window's fixed outline that a triangle of the window, as
+  // drawn, misses by more than the bound (the outline polylines' 1D test could not see the
+  // triangle's cross slope); the build adds them to the outline and builds again.
+  std::vector<Pixel> border_violations;
 };
 
 // A constraint segment in a window: two pixels.
@@ -251,8 +366,11 @@ DemFacts demFacts(const DemGrid& dem) {
 
 class GreedyInsertion {
  public:
-  GreedyInsertion(const DemGrid& dem, double max_error_m, Window window, const DemFacts& facts)
-      : dem_(dem), width_(dem.width), max_error_(max_error_m), window_(window),
+  // globe: measure the triangles as drawn on the globe (DemOnGlobe), exactly, or nullptr: in
+  // the grid frame, heights interpolated linearly.
+  GreedyInsertion(const DemGrid& dem, const DemOnGlobe* globe, double max_error_m, Window window,
+                  const DemFacts& facts)
+      : dem_(dem), globe_(globe), width_(dem.width), max_error_(max_error_m), window_(window),
         has_nodata_(facts.has_nodata), virtual_height_(facts.virtual_height) {}
 
   // fixed_border: the pixels of the window's outline inserted before any error-driven
@@ -301,6 +419,7 @@ class GreedyInsertion {
         reported = done;
       }
     }
+    if (globe_ && border_fixed_) collectBorderViolations();
   }
 
   // Inserts a pixel of the window's outline (not a corner) into the hull triangle whose
@@ -355,6 +474,7 @@ class GreedyInsertion {
       }
       out.constrained_edges.push_back({output_index[static_cast<std::size_t>(u)], output_index[static_cast<std::size_t>(v)]});
     }
+    out.border_violations = border_violations_;
     out.segments_bent = segments_bent_;
     out.segments_bent_to_end = segments_bent_far_;
     out.constrained_edges_dropped += segments_dropped_;
@@ -796,6 +916,21 @@ class GreedyInsertion {
     const double gx = (dz1 * vy - dz2 * uy) * inverse_area2;
     const double gy = (dz2 * ux - dz1 * vx) * inverse_area2;
     const double z0 = za - gx * a.x - gy * a.y;
+    // On the globe: the triangle as drawn, straight in ECEF, measured exactly at every pixel
+    // (it sags below the plane of its heights), but on a pole row (DemOnGlobe::poleRow), whose
+    // pixels are all one point, in the grid. Degenerate in ECEF (two corners at a pole), it is
+    // measured in the grid, as without a globe.
+    if (globe_) {
+      const DrawnTriangle drawn(globe_->point(pixelIndex(a)), globe_->point(pixelIndex(b)),
+                                globe_->point(pixelIndex(c)));
+      if (!drawn.degenerate()) {
+        Pixel best;
+        double best_error = -1;
+        worstExact(a, b, c, drawn, gx, gy, z0, &best, &best_error, &covers_nodata);
+        finishScan(t, a, b, c, best, best_error, covers_nodata, touches_virtual);
+        return;
+      }
+    }
 
     // Edge functions w(x) = alpha * x + beta(y) >= 0 inside, for edges a->b, b->c, c->a.
     const Pixel from[3] = {a, b, c}, to[3] = {b, c, a};
@@ -876,35 +1011,7 @@ class GreedyInsertion {
     }
     for (std::int32_t y = min_y; y <= max_y && max_x - min_x >= kNarrowTriangle; ++y) {
       std::int64_t x0 = min_x, x1 = max_x;
-      bool empty = false;
-      for (int k = 0; k < 3; ++k) {
-        const std::int64_t beta = beta_at_0[k] + beta_step[k] * y;
-        // Inside: alpha * x + beta >= 0.
-        if (alpha[k] > 0) {
-          // Truncation, not std::ceil (a library call without SSE4.1): the loops below make
-          // it exact either way.
-          std::int64_t bound = static_cast<std::int64_t>(static_cast<double>(-beta) * inverse_alpha[k]);
-          while (alpha[k] * bound + beta < 0) ++bound;
-          while (alpha[k] * (bound - 1) + beta >= 0) --bound;
-          x0 = std::max(x0, bound);
-        } else if (alpha[k] < 0) {
-          std::int64_t bound = static_cast<std::int64_t>(static_cast<double>(-beta) * inverse_alpha[k]);
-          while (alpha[k] * bound + beta < 0) --bound;
-          while (alpha[k] * (bound + 1) + beta >= 0) ++bound;
-          x1 = std::min(x1, bound);
-        } else if (beta < 0) {
-          empty = true;
-        }
-      }
-      if (border_fixed_) {
-        // A fixed outline's pixels are within the bound by its polyline (1D arithmetic that
-        // the plane would only repeat up to rounding): never candidates, or a vertex could
-        // appear on one side of a shared border only.
-        if (y == window_.y0 || y == window_.y1) continue;
-        x0 = std::max<std::int64_t>(x0, window_.x0 + 1);
-        x1 = std::min<std::int64_t>(x1, window_.x1 - 1);
-      }
-      if (empty || x0 > x1) continue;
+      if (!rowSpan(y, alpha, beta_step, beta_at_0, inverse_alpha, &x0, &x1)) continue;
       const float* row = heights + static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
       const double row_z = gy * y + z0;
       if (has_nodata_) {
@@ -923,6 +1030,49 @@ class GreedyInsertion {
         }
       }
     }
+    finishScan(t, a, b, c, best, best_error, covers_nodata, touches_virtual);
+  }
+
+  // The span [x0, x1] of row y inside the triangle whose edge functions are
+  // alpha * x + beta_at_0 + beta_step * y >= 0 (within the incoming [x0, x1]), without a
+  // fixed outline's pixels; false when empty.
+  bool rowSpan(std::int32_t y, const std::int64_t alpha[3], const std::int64_t beta_step[3],
+               const std::int64_t beta_at_0[3], const double inverse_alpha[3], std::int64_t* x0,
+               std::int64_t* x1) const {
+    for (int k = 0; k < 3; ++k) {
+      const std::int64_t beta = beta_at_0[k] + beta_step[k] * y;
+      // Inside: alpha * x + beta >= 0.
+      if (alpha[k] > 0) {
+        // Truncation, not std::ceil (a library call without SSE4.1): the loops below make
+        // it exact either way.
+        std::int64_t bound = static_cast<std::int64_t>(static_cast<double>(-beta) * inverse_alpha[k]);
+        while (alpha[k] * bound + beta < 0) ++bound;
+        while (alpha[k] * (bound - 1) + beta >= 0) --bound;
+        *x0 = std::max(*x0, bound);
+      } else if (alpha[k] < 0) {
+        std::int64_t bound = static_cast<std::int64_t>(static_cast<double>(-beta) * inverse_alpha[k]);
+        while (alpha[k] * bound + beta < 0) --bound;
+        while (alpha[k] * (bound + 1) + beta >= 0) ++bound;
+        *x1 = std::min(*x1, bound);
+      } else if (beta < 0) {
+        return false;
+      }
+    }
+    if (border_fixed_) {
+      // A fixed outline's pixels are within the bound by its polyline (1D arithmetic that
+      // the plane would only repeat up to rounding): never candidates, or a vertex could
+      // appear on one side of a shared border only.
+      if (y == window_.y0 || y == window_.y1) return false;
+      *x0 = std::max<std::int64_t>(*x0, window_.x0 + 1);
+      *x1 = std::min<std::int64_t>(*x1, window_.x1 - 1);
+    }
+    return *x0 <= *x1;
+  }
+
+  // Stores a scan's result: the candidate pixel and the triangle's error, or a drop mark for a
+  // triangle over nodata.
+  void finishScan(std::int32_t t, Pixel a, Pixel b, Pixel c, Pixel best, double best_error, bool covers_nodata,
+                  bool touches_virtual) {
     // Never pick a vertex: its error is rounding noise, and inserting it twice would break
     // the triangulation.
     if ((best.x == a.x && best.y == a.y) || (best.x == b.x && best.y == b.y) ||
@@ -939,6 +1089,137 @@ class GreedyInsertion {
     best_error = std::max(best_error, 0.0);
     candidate_[static_cast<std::size_t>(t)] = best;
     error_[static_cast<std::size_t>(t)] = best_error;
+  }
+
+  std::size_t pixelIndex(Pixel p) const {
+    return static_cast<std::size_t>(p.y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(p.x);
+  }
+
+  double exactError(const DrawnTriangle& drawn, Pixel p) const { return exactErrorAt(*globe_, drawn, pixelIndex(p)); }
+
+  // Calls visit(x, y) for every pixel inside triangle (a, b, c), row by row, left to right,
+  // within the box [x_first, x_last] x [y_first, y_last].
+  template <typename Visit>
+  static void forEachInside(Pixel a, Pixel b, Pixel c, std::int32_t x_first, std::int32_t x_last,
+                            std::int32_t y_first, std::int32_t y_last, Visit&& visit) {
+    const Pixel from[3] = {a, b, c}, to[3] = {b, c, a};
+    std::int64_t alpha[3], beta_step[3], w_row[3];
+    for (int k = 0; k < 3; ++k) {
+      alpha[k] = -std::int64_t{to[k].y - from[k].y};
+      beta_step[k] = std::int64_t{to[k].x - from[k].x};
+      const std::int64_t beta_at_0 = -beta_step[k] * from[k].y + std::int64_t{to[k].y - from[k].y} * from[k].x;
+      w_row[k] = alpha[k] * x_first + beta_step[k] * y_first + beta_at_0;
+    }
+    for (std::int32_t y = y_first; y <= y_last; ++y) {
+      std::int64_t w0 = w_row[0], w1 = w_row[1], w2 = w_row[2];
+      for (std::int32_t x = x_first; x <= x_last; ++x, w0 += alpha[0], w1 += alpha[1], w2 += alpha[2]) {
+        if ((w0 | w1 | w2) >= 0) visit(x, y);
+      }
+      for (int k = 0; k < 3; ++k) w_row[k] += beta_step[k];
+    }
+  }
+
+  // The worst pixel of triangle (a, b, c) by its exact error on the globe (on a pole row: by
+  // the plane z = gx x + gy y + z0 of its heights), other than a fixed outline's pixels (the
+  // first in row-major order on ties; best_error -1 when none); notes nodata. Vectorised
+  // without nodata or a pole row, pixel by pixel with them.
+  void worstExact(Pixel a, Pixel b, Pixel c, const DrawnTriangle& drawn, double gx, double gy, double z0, Pixel* best,
+                  double* best_error, bool* covers_nodata) const {
+    std::int32_t x_first = std::min({a.x, b.x, c.x}), x_last = std::max({a.x, b.x, c.x});
+    std::int32_t y_first = std::min({a.y, b.y, c.y}), y_last = std::max({a.y, b.y, c.y});
+    *best_error = -1;
+    *best = a;
+    const bool pole_rows = globe_->poleRow(y_first) || globe_->poleRow(y_last);
+#if defined(__x86_64__)
+    if (!has_nodata_ && !pole_rows && kHasAvx2) {
+      const Pixel from[3] = {a, b, c}, to[3] = {b, c, a};
+      std::int64_t alpha[3], beta_step[3], beta_at_0[3];
+      for (int k = 0; k < 3; ++k) {
+        alpha[k] = -std::int64_t{to[k].y - from[k].y};
+        beta_step[k] = std::int64_t{to[k].x - from[k].x};
+        beta_at_0[k] = -beta_step[k] * from[k].y + std::int64_t{to[k].y - from[k].y} * from[k].x;
+      }
+      if (x_last - x_first < kNarrowTriangle) {
+        if (border_fixed_) {
+          x_first = std::max(x_first, window_.x0 + 1);
+          x_last = std::min(x_last, window_.x1 - 1);
+          y_first = std::max(y_first, window_.y0 + 1);
+          y_last = std::min(y_last, window_.y1 - 1);
+        }
+        if (x_first > x_last) return;
+        std::int64_t w_row[3];
+        for (int k = 0; k < 3; ++k) w_row[k] = alpha[k] * x_first + beta_step[k] * y_first + beta_at_0[k];
+        boxWorstPixelExactAvx2(*globe_, drawn, width_, x_first, x_last, y_first, y_last, w_row, alpha, beta_step,
+                               best_error, &best->x, &best->y);
+        return;
+      }
+      double inverse_alpha[3];
+      for (int k = 0; k < 3; ++k) inverse_alpha[k] = alpha[k] != 0 ? 1.0 / static_cast<double>(alpha[k]) : 0.0;
+      for (std::int32_t y = y_first; y <= y_last; ++y) {
+        std::int64_t x0 = x_first, x1 = x_last;
+        if (!rowSpan(y, alpha, beta_step, beta_at_0, inverse_alpha, &x0, &x1)) continue;
+        const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
+        const double row_max = rowMaxExactAvx2(*globe_, drawn, row, x0, x1);
+        if (row_max > *best_error) {
+          for (std::int64_t x = x0; x <= x1; ++x) {
+            if (exactErrorAt(*globe_, drawn, row + static_cast<std::size_t>(x)) == row_max) {
+              *best = {static_cast<std::int32_t>(x), y};
+              *best_error = row_max;
+              break;
+            }
+          }
+        }
+      }
+      return;
+    }
+#endif
+    if (border_fixed_) {
+      x_first = std::max(x_first, window_.x0 + 1);
+      x_last = std::min(x_last, window_.x1 - 1);
+      y_first = std::max(y_first, window_.y0 + 1);
+      y_last = std::min(y_last, window_.y1 - 1);
+    }
+    if (x_first > x_last) return;
+    forEachInside(a, b, c, x_first, x_last, y_first, y_last, [&](std::int32_t x, std::int32_t y) {
+      const float h = dem_.heights_m[pixelIndex({x, y})];
+      if (std::isnan(h)) {
+        *covers_nodata = true;
+        return;
+      }
+      const double error = pole_rows && globe_->poleRow(y) ? std::fabs(gx * static_cast<double>(x) + (gy * y + z0) - h)
+                                                          : exactError(drawn, {x, y});
+      if (error > *best_error) {
+        *best_error = error;
+        *best = {x, y};
+      }
+    });
+  }
+
+  // A fixed outline (a windowed build's shared border polylines) is chosen in 1D, before the
+  // windows' triangles exist: the pixels on it that a triangle of this window, as drawn,
+  // misses by more than the bound are collected for the build to add to the outline.
+  void collectBorderViolations() {
+    const auto triangle_count = static_cast<std::int32_t>(triangles_.size() / 3);
+    for (std::int32_t t = 0; t < triangle_count; ++t) {
+      if (dropped_[static_cast<std::size_t>(t)]) continue;
+      const Pixel corner[3] = {vertex(3 * t), vertex(3 * t + 1), vertex(3 * t + 2)};
+      const DrawnTriangle drawn(globe_->point(pixelIndex(corner[0])), globe_->point(pixelIndex(corner[1])),
+                                globe_->point(pixelIndex(corner[2])));
+      if (drawn.degenerate()) continue;
+      for (int k = 0; k < 3; ++k) {
+        const Pixel p = corner[k], q = corner[(k + 1) % 3];
+        const bool along_column = p.x == q.x && (p.x == window_.x0 || p.x == window_.x1);
+        const bool along_row = p.y == q.y && (p.y == window_.y0 || p.y == window_.y1);
+        if (!along_column && !along_row) continue;
+        const std::int32_t steps = std::max(std::abs(q.x - p.x), std::abs(q.y - p.y));
+        const std::int32_t dx = (q.x > p.x) - (q.x < p.x), dy = (q.y > p.y) - (q.y < p.y);
+        for (std::int32_t i = 1; i < steps; ++i) {
+          const Pixel r{p.x + dx * i, p.y + dy * i};
+          if (std::isnan(dem_.heights_m[pixelIndex(r)]) || globe_->poleRow(r.y)) continue;
+          if (exactError(drawn, r) > max_error_) border_violations_.push_back(r);
+        }
+      }
+    }
   }
 
   // ---- max-heap of triangles by error, with positions for removal ----
@@ -996,6 +1277,7 @@ class GreedyInsertion {
   }
 
   const DemGrid& dem_;
+  const DemOnGlobe* globe_;
   const std::int32_t width_;
   const double max_error_;
   static constexpr double kMixedPriority = 1e12;  // above any height error on Earth
@@ -1016,6 +1298,7 @@ class GreedyInsertion {
   std::vector<std::uint8_t> pending_flag_;
   std::vector<HeapEntry> heap_;
   std::vector<std::int32_t> pending_;
+  std::vector<Pixel> border_violations_;
   // Break lines: only used when the window has some.
   static constexpr int kMaxBends = 16;
   bool tracking_ = false;
@@ -1030,17 +1313,64 @@ class GreedyInsertion {
 
 namespace {
 
+// How far a run's chord from pixel p to pixel q misses pixel r on the globe: the signed
+// distance along r's vertical from r's DEM point to the point of the chord nearest to that
+// vertical (positive: the chord is above), plus what a triangle holding the chord may add
+// across it: the gap between the vertical and the chord times twice the local slope.
+double chordError(const DemOnGlobe& globe, std::size_t p, std::size_t q, std::size_t r, double slope) {
+  const EcefPoint& a = globe.point(p);
+  const EcefPoint& b = globe.point(q);
+  const EcefPoint& point = globe.point(r);
+  const UnitVector& up = globe.up(r);
+  const double d[3] = {b.x - a.x, b.y - a.y, b.z - a.z};
+  const double w[3] = {point.x - a.x, point.y - a.y, point.z - a.z};
+  const double nd = up[0] * d[0] + up[1] * d[1] + up[2] * d[2];
+  const double wn = up[0] * w[0] + up[1] * w[1] + up[2] * w[2];
+  const double wd = w[0] * d[0] + w[1] * d[1] + w[2] * d[2];
+  const double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  const double denominator = dd - nd * nd;
+  if (!(denominator > 0)) return kWallError;
+  const double s = (wd - wn * nd) / denominator;  // along the chord
+  const double t = s * nd - wn;                   // along the vertical
+  double gap2 = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double g = w[k] + t * up[k] - s * d[k];
+    gap2 += g * g;
+  }
+  return std::fabs(t) + 2 * slope * std::sqrt(gap2);
+}
+
 // Border polylines for the windowed build: the positions along one straight run of pixels
-// (a window side, endpoints included) that make it within max_error of the DEM by linear
-// interpolation, by recursive worst-pixel insertion, keeping the `forced` positions (break
-// line ends on the border). A run with nodata keeps every valid pixel (and its endpoints,
-// which become virtual when nodata).
-std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double max_error_m,
-                               const std::vector<Pixel>& forced) {
+// (a window side, endpoints included) that make it within max_error of the DEM, by recursive
+// worst-pixel insertion, keeping the `forced` positions (break line ends on the border, and
+// pixels a window's triangles missed). Without a globe the error is linear interpolation of
+// the heights; on the globe it is chordError. A run with nodata keeps every valid pixel (and
+// its endpoints, which become virtual when nodata). A run along a pole row is measured in the
+// grid (its pixels are one point).
+std::vector<Pixel> simplifyRun(const DemGrid& dem, const DemOnGlobe* globe, Pixel from, Pixel to,
+                               double max_error_m, const std::vector<Pixel>& forced) {
   const std::int32_t length = std::max(std::abs(to.x - from.x), std::abs(to.y - from.y));
   const std::int32_t dx = (to.x > from.x) - (to.x < from.x), dy = (to.y > from.y) - (to.y < from.y);
   auto at = [&](std::int32_t i) { return Pixel{from.x + dx * i, from.y + dy * i}; };
   auto height = [&](std::int32_t i) { const Pixel p = at(i); return dem.heightAt(p.x, p.y); };
+  auto index = [&](std::int32_t i) { const Pixel p = at(i); return dem.index(p.x, p.y); };
+  // The DEM's slope along and across the run at position i (rise over run between the
+  // neighbouring pixels' points on the globe), for chordError.
+  auto slope = [&](std::int32_t i) {
+    const Pixel p = at(i);
+    double worst = 0;
+    for (const auto& [ox, oy] : {std::pair{1, 0}, std::pair{0, 1}}) {
+      const Pixel u{std::max(0, p.x - ox), std::max(0, p.y - oy)};
+      const Pixel v{std::min(dem.width - 1, p.x + ox), std::min(dem.height - 1, p.y + oy)};
+      const float hu = dem.heightAt(u.x, u.y), hv = dem.heightAt(v.x, v.y);
+      if (std::isnan(hu) || std::isnan(hv) || (u.x == v.x && u.y == v.y)) continue;
+      const EcefPoint& pu = globe->point(dem.index(u.x, u.y));
+      const EcefPoint& pv = globe->point(dem.index(v.x, v.y));
+      const double distance = std::hypot(pv.x - pu.x, pv.y - pu.y, pv.z - pu.z);
+      if (distance > 0) worst = std::max(worst, std::fabs(static_cast<double>(hv) - hu) / distance);
+    }
+    return worst;
+  };
   std::vector<std::uint8_t> keep(static_cast<std::size_t>(length) + 1, 0);
   keep.front() = keep.back() = 1;
   bool has_nodata = false;
@@ -1049,6 +1379,13 @@ std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double 
     for (std::int32_t i = 1; i < length; ++i) keep[static_cast<std::size_t>(i)] = !std::isnan(height(i));
   } else {
     for (const Pixel& p : forced) keep[static_cast<std::size_t>(std::max(std::abs(p.x - from.x), std::abs(p.y - from.y)))] = 1;
+    // A run along a pole row is one point on the globe: measured in the grid.
+    const bool on_globe = globe && !(from.y == to.y && globe->poleRow(from.y));
+    std::vector<double> slopes;
+    if (on_globe) {
+      slopes.resize(static_cast<std::size_t>(length) + 1);
+      for (std::int32_t i = 0; i <= length; ++i) slopes[static_cast<std::size_t>(i)] = slope(i);
+    }
     std::vector<std::pair<std::int32_t, std::int32_t>> segments;
     for (std::int32_t i0 = 0, i = 1; i <= length; ++i) {
       if (!keep[static_cast<std::size_t>(i)]) continue;
@@ -1062,8 +1399,8 @@ std::vector<Pixel> simplifyRun(const DemGrid& dem, Pixel from, Pixel to, double 
       double worst = max_error_m;
       std::int32_t worst_i = -1;
       for (std::int32_t i = i0 + 1; i < i1; ++i) {
-        const double line = h0 + (h1 - h0) * (i - i0) / (i1 - i0);
-        const double error = std::fabs(line - height(i));
+        const double error = on_globe ? chordError(*globe, index(i0), index(i1), index(i), slopes[static_cast<std::size_t>(i)])
+                                      : std::fabs(h0 + (h1 - h0) * (i - i0) / (i1 - i0) - height(i));
         if (error > worst) worst = error, worst_i = i;
       }
       if (worst_i < 0) continue;
@@ -1134,6 +1471,97 @@ std::vector<WindowSegment> splitAtWindowBorders(const DemGrid& dem, const std::v
   return pieces;
 }
 
+// Builds every window of a windowed TIN (their outlines given: vertical[i][j] is column
+// xs[i] between ys[j] and ys[j+1], horizontal[j][i] row ys[j] between xs[i] and xs[i+1]) and
+// stitches them into result. Every batch of windows is built in parallel, then stitched into
+// the mesh and released, so memory holds the DEM, the mesh and one batch. Stitch: vertices on
+// shared borders have the same pixel position in both windows; only those (on a window's
+// outline) need looking up, every other vertex is new. Returns the outline pixels the
+// windows' triangles miss on the globe (WindowMesh::border_violations), sorted, unique.
+std::vector<Pixel> buildWindows(const DemGrid& dem, const TinOptions& options, const DemFacts& facts,
+                                const std::vector<std::int32_t>& xs, const std::vector<std::int32_t>& ys,
+                                const std::vector<std::vector<std::vector<Pixel>>>& vertical,
+                                const std::vector<std::vector<std::vector<Pixel>>>& horizontal,
+                                const std::vector<std::vector<WindowSegment>>& window_segments, Progress* progress,
+                                ConstrainedTin& result) {
+  const std::size_t nx = xs.size() - 1, ny = ys.size() - 1;
+  if (progress) progress->beginStage("TIN (greedy insertion, windowed)", nx * ny);
+  const std::size_t window_count = nx * ny;
+  std::vector<WindowMesh> batch;
+  TinMesh& mesh = result.mesh;
+  std::unordered_map<std::uint64_t, std::uint32_t> outline_index;
+  std::vector<std::uint32_t> remap;
+  std::vector<Pixel> violations;
+  constexpr std::size_t kBatch = 64;  // report progress and check Ctrl-C between batches
+  for (std::size_t first = 0; first < window_count; first += kBatch) {
+    const std::size_t end = std::min(window_count, first + kBatch);
+    batch.assign(end - first, WindowMesh{});
+    tbb::parallel_for(first, end, [&](std::size_t b) {
+      const std::size_t i = b % nx, j = b / nx;
+      std::vector<Pixel> border;
+      for (const auto* run : {&horizontal[j][i], &horizontal[j + 1][i], &vertical[i][j], &vertical[i + 1][j]}) {
+        border.insert(border.end(), run->begin(), run->end());
+      }
+      GreedyInsertion insertion(dem, options.globe, options.max_error_m, {xs[i], ys[j], xs[i + 1], ys[j + 1]}, facts);
+      insertion.run(nullptr, &border, window_segments.empty() ? nullptr : &window_segments[b]);
+      batch[b - first] = insertion.mesh();
+    });
+    // Grow the mesh once per batch to the size projected from the windows done so far (plus
+    // 10 %), instead of doubling: a doubling of the final arrays would need 3x their size.
+    std::size_t batch_vertices = 0, batch_indices = 0;
+    for (const WindowMesh& window : batch) {
+      batch_vertices += window.pixels.size();
+      batch_indices += window.triangle_indices.size();
+    }
+    const double projection = 1.1 * static_cast<double>(window_count) / static_cast<double>(end);
+    const auto projected = [&](std::size_t size) {
+      return std::max(size, static_cast<std::size_t>(static_cast<double>(size) * projection));
+    };
+    if (mesh.vertices.size() + batch_vertices > mesh.vertices.capacity()) {
+      mesh.vertices.reserve(projected(mesh.vertices.size() + batch_vertices));
+    }
+    if (mesh.triangle_indices.size() + batch_indices > mesh.triangle_indices.capacity()) {
+      mesh.triangle_indices.reserve(projected(mesh.triangle_indices.size() + batch_indices));
+    }
+    for (std::size_t b = first; b < end; ++b) {
+      WindowMesh& window = batch[b - first];
+      const std::size_t i = b % nx, j = b / nx;
+      remap.resize(window.pixels.size());
+      for (std::size_t v = 0; v < window.pixels.size(); ++v) {
+        const Pixel p = window.pixels[v];
+        const bool on_outline = p.x == xs[i] || p.x == xs[i + 1] || p.y == ys[j] || p.y == ys[j + 1];
+        if (!on_outline) {
+          remap[v] = static_cast<std::uint32_t>(mesh.vertices.size());
+          mesh.vertices.push_back(gridPoint(dem, p));
+          continue;
+        }
+        const std::uint64_t key = (static_cast<std::uint64_t>(p.y) << 32) | static_cast<std::uint32_t>(p.x);
+        const auto [it, inserted] = outline_index.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
+        if (inserted) mesh.vertices.push_back(gridPoint(dem, p));
+        remap[v] = it->second;
+      }
+      for (const std::uint32_t v : window.triangle_indices) mesh.triangle_indices.push_back(remap[v]);
+      for (const auto& edge : window.constrained_edges) {
+        const std::uint32_t u = remap[edge[0]], v = remap[edge[1]];
+        result.constrained_edges.push_back({std::min(u, v), std::max(u, v)});
+      }
+      result.edges_dropped += window.constrained_edges_dropped;
+      result.segments_bent += window.segments_bent;
+      result.segments_bent_to_end += window.segments_bent_to_end;
+      violations.insert(violations.end(), window.border_violations.begin(), window.border_violations.end());
+      window = WindowMesh{};
+    }
+    if (progress) progress->advance(end - first);
+  }
+  if (progress) progress->endStage();
+  std::sort(violations.begin(), violations.end(),
+            [](const Pixel& l, const Pixel& r) { return l.y != r.y ? l.y < r.y : l.x < r.x; });
+  violations.erase(std::unique(violations.begin(), violations.end(),
+                               [](const Pixel& l, const Pixel& r) { return l.x == r.x && l.y == r.y; }),
+                   violations.end());
+  return violations;
+}
+
 }  // namespace
 
 TinMesh buildTin(const DemGrid& dem, const TinOptions& options, Progress& progress) {
@@ -1169,7 +1597,7 @@ ConstrainedTin buildConstrainedTin(const DemGrid& dem, const TinOptions& options
       if (segment.col0 == segment.col1 && segment.row0 == segment.row1) continue;
       window_segments.push_back({{segment.col0, segment.row0}, {segment.col1, segment.row1}});
     }
-    GreedyInsertion insertion(dem, options.max_error_m, {0, 0, dem.width - 1, dem.height - 1}, facts);
+    GreedyInsertion insertion(dem, options.globe, options.max_error_m, {0, 0, dem.width - 1, dem.height - 1}, facts);
     insertion.run(&progress, nullptr, &window_segments);
     progress.endStage();
     WindowMesh window_mesh = insertion.mesh();
@@ -1237,87 +1665,50 @@ ConstrainedTin buildConstrainedTin(const DemGrid& dem, const TinOptions& options
       }
     }
   }
-  for (std::size_t i = 0; i < xs.size(); ++i) {
-    for (std::size_t j = 0; j < ny; ++j) {
-      vertical[i][j] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i], ys[j + 1]}, options.max_error_m, vertical[i][j]);
+  // On the globe, a window's triangles may miss a pixel of its fixed outline (the 1D test of
+  // the outline cannot see a triangle's cross slope): such pixels join the outline and the
+  // windows are built again. Rare; each round adds vertices, so it ends.
+  std::vector<std::vector<std::vector<Pixel>>> forced_vertical = vertical, forced_horizontal = horizontal;
+  const std::size_t split_dropped = result.edges_dropped;
+  for (int round = 0;; ++round) {
+    for (std::size_t i = 0; i < xs.size(); ++i) {
+      for (std::size_t j = 0; j < ny; ++j) {
+        vertical[i][j] =
+            simplifyRun(dem, options.globe, {xs[i], ys[j]}, {xs[i], ys[j + 1]}, options.max_error_m, forced_vertical[i][j]);
+      }
+    }
+    for (std::size_t j = 0; j < ys.size(); ++j) {
+      for (std::size_t i = 0; i < nx; ++i) {
+        horizontal[j][i] = simplifyRun(dem, options.globe, {xs[i], ys[j]}, {xs[i + 1], ys[j]}, options.max_error_m,
+                                       forced_horizontal[j][i]);
+      }
+    }
+    result.mesh = {};
+    result.constrained_edges.clear();
+    result.edges_dropped = split_dropped;
+    result.segments_bent = result.segments_bent_to_end = 0;
+    std::vector<Pixel> violations = buildWindows(dem, options, facts, xs, ys, vertical, horizontal, window_segments,
+                                                 round == 0 ? &progress : nullptr, result);
+    if (violations.empty()) break;
+    if (round >= 16) {
+      throw Error(ErrorCode::Internal, "TIN: window outlines still miss " + std::to_string(violations.size()) +
+                                           " pixels by more than the bound after 16 rounds");
+    }
+    progress.note("TIN: " + std::to_string(violations.size()) +
+                  " window outline pixels added where a triangle as drawn missed them; building again");
+    for (const Pixel& p : violations) {
+      const auto column = std::lower_bound(xs.begin(), xs.end(), p.x);
+      const auto row = std::lower_bound(ys.begin(), ys.end(), p.y);
+      if (column != xs.end() && *column == p.x) {
+        const auto j = static_cast<std::size_t>(std::upper_bound(ys.begin(), ys.end(), p.y) - ys.begin()) - 1;
+        forced_vertical[static_cast<std::size_t>(column - xs.begin())][std::min(j, ny - 1)].push_back(p);
+      } else if (row != ys.end() && *row == p.y) {
+        const auto i = static_cast<std::size_t>(std::upper_bound(xs.begin(), xs.end(), p.x) - xs.begin()) - 1;
+        forced_horizontal[static_cast<std::size_t>(row - ys.begin())][std::min(i, nx - 1)].push_back(p);
+      }
     }
   }
-  for (std::size_t j = 0; j < ys.size(); ++j) {
-    for (std::size_t i = 0; i < nx; ++i) {
-      horizontal[j][i] = simplifyRun(dem, {xs[i], ys[j]}, {xs[i + 1], ys[j]}, options.max_error_m, horizontal[j][i]);
-    }
-  }
-  // Every batch of windows is built in parallel, then stitched into the mesh and released,
-  // so memory holds the DEM, the mesh and one batch. Stitch: vertices on shared borders have
-  // the same pixel position in both windows; only those (on a window's outline) need looking
-  // up, every other vertex is new.
-  progress.beginStage("TIN (greedy insertion, windowed)", nx * ny);
-  const std::size_t window_count = nx * ny;
-  std::vector<WindowMesh> batch;
   TinMesh& mesh = result.mesh;
-  std::unordered_map<std::uint64_t, std::uint32_t> outline_index;
-  std::vector<std::uint32_t> remap;
-  constexpr std::size_t kBatch = 64;  // report progress and check Ctrl-C between batches
-  for (std::size_t first = 0; first < window_count; first += kBatch) {
-    const std::size_t end = std::min(window_count, first + kBatch);
-    batch.assign(end - first, WindowMesh{});
-    tbb::parallel_for(first, end, [&](std::size_t b) {
-      const std::size_t i = b % nx, j = b / nx;
-      std::vector<Pixel> border;
-      for (const auto* run : {&horizontal[j][i], &horizontal[j + 1][i], &vertical[i][j], &vertical[i + 1][j]}) {
-        border.insert(border.end(), run->begin(), run->end());
-      }
-      GreedyInsertion insertion(dem, options.max_error_m, {xs[i], ys[j], xs[i + 1], ys[j + 1]}, facts);
-      insertion.run(nullptr, &border, window_segments.empty() ? nullptr : &window_segments[b]);
-      batch[b - first] = insertion.mesh();
-    });
-    // Grow the mesh once per batch to the size projected from the windows done so far (plus
-    // 10 %), instead of doubling: a doubling of the final arrays would need 3x their size.
-    std::size_t batch_vertices = 0, batch_indices = 0;
-    for (const WindowMesh& window : batch) {
-      batch_vertices += window.pixels.size();
-      batch_indices += window.triangle_indices.size();
-    }
-    const double projection = 1.1 * static_cast<double>(window_count) / static_cast<double>(end);
-    const auto projected = [&](std::size_t size) {
-      return std::max(size, static_cast<std::size_t>(static_cast<double>(size) * projection));
-    };
-    if (mesh.vertices.size() + batch_vertices > mesh.vertices.capacity()) {
-      mesh.vertices.reserve(projected(mesh.vertices.size() + batch_vertices));
-    }
-    if (mesh.triangle_indices.size() + batch_indices > mesh.triangle_indices.capacity()) {
-      mesh.triangle_indices.reserve(projected(mesh.triangle_indices.size() + batch_indices));
-    }
-    for (std::size_t b = first; b < end; ++b) {
-      WindowMesh& window = batch[b - first];
-      const std::size_t i = b % nx, j = b / nx;
-      remap.resize(window.pixels.size());
-      for (std::size_t v = 0; v < window.pixels.size(); ++v) {
-        const Pixel p = window.pixels[v];
-        const bool on_outline = p.x == xs[i] || p.x == xs[i + 1] || p.y == ys[j] || p.y == ys[j + 1];
-        if (!on_outline) {
-          remap[v] = static_cast<std::uint32_t>(mesh.vertices.size());
-          mesh.vertices.push_back(gridPoint(dem, p));
-          continue;
-        }
-        const std::uint64_t key = (static_cast<std::uint64_t>(p.y) << 32) | static_cast<std::uint32_t>(p.x);
-        const auto [it, inserted] = outline_index.try_emplace(key, static_cast<std::uint32_t>(mesh.vertices.size()));
-        if (inserted) mesh.vertices.push_back(gridPoint(dem, p));
-        remap[v] = it->second;
-      }
-      for (const std::uint32_t v : window.triangle_indices) mesh.triangle_indices.push_back(remap[v]);
-      for (const auto& edge : window.constrained_edges) {
-        const std::uint32_t u = remap[edge[0]], v = remap[edge[1]];
-        result.constrained_edges.push_back({std::min(u, v), std::max(u, v)});
-      }
-      result.edges_dropped += window.constrained_edges_dropped;
-      result.segments_bent += window.segments_bent;
-      result.segments_bent_to_end += window.segments_bent_to_end;
-      window = WindowMesh{};
-    }
-    progress.advance(end - first);
-  }
-  progress.endStage();
   if (mesh.triangleCount() == 0) {
     throw Error(ErrorCode::Input, "no triangle can be built: the DEM has no three neighbouring "
                                   "valid pixels; expected a DEM with some contiguous data");

@@ -11,7 +11,14 @@
 // counter-clockwise seen from above (TinMesh's convention).
 //
 // Guarantee: every valid pixel inside the TIN is within max_error_m of it, measured at
-// pixel centres by linear interpolation in the triangle containing the pixel.
+// pixel centres against the triangle containing the pixel in the grid: on the globe
+// (options.globe), from the pixel's DEM point to the triangle's plane in ECEF along the
+// pixel's vertical, exactly (measureTin with the globe gives the same numbers); without one,
+// by linear interpolation of the heights. On the globe every scan is exact (vectorised, as the
+// grid scan); a windowed build's outline polylines are chosen in 1D against the chord, and a
+// pixel of them that a window's triangle still misses by more than the bound joins the outline
+// (the windows are then built again). Triangles degenerate in ECEF (two corners at a pole) are
+// measured in the grid.
 // Nodata (NaN): no triangle covers a nodata pixel. Nodata corners become virtual vertices,
 // and a triangle covering nodata or a virtual vertex is refined while it holds valid pixels
 // other than its vertices, then left out, so the TIN follows holes and ragged borders of
@@ -28,6 +35,8 @@
 
 namespace terratiles {
 
+class DemOnGlobe;
+
 struct TinOptions {
   double max_error_m = 0.5;  // vertical error bound, metres (paper: 0.5 m)
   // Windowed build: > 0 splits the grid into windows of this many pixels per side. Their
@@ -40,6 +49,11 @@ struct TinOptions {
   // for 0.01 % fewer triangles than Delatin's single triangulation; 64 is faster still but
   // adds 2 % triangles at 20 m on N57E011.
   std::int32_t block_pixels = 128;
+  // The DEM on the globe (for the DEM that is built): the error is measured on the triangle as
+  // a renderer draws it, straight in ECEF, along each pixel's vertical (DemOnGlobe), so long
+  // edges over flat ground are refined where their sag would break the bound. nullptr: in
+  // the grid frame, heights interpolated linearly (a flat earth, for experiments and tests).
+  const DemOnGlobe* globe = nullptr;
 };
 
 // A break line piece between two pixel centres (col, row) of the grid, e.g. part of a road or

@@ -4,9 +4,16 @@
 #include <cmath>
 #include <vector>
 
+#include "src/base/error.h"
+
 namespace terratiles {
 
-TinErrorStatistics measureTin(const DemGrid& dem, const TinMesh& mesh) {
+namespace {
+
+// Both measures: per triangle, forEachTriangle(a, b, c, t, visit) calls visit(pixel, error_m)
+// for the pixels triangle t covers.
+template <typename ForEachPixel>
+TinErrorStatistics measure(const DemGrid& dem, const TinMesh& mesh, ForEachPixel&& forEachPixel) {
   TinErrorStatistics stats;
   std::vector<std::uint8_t> covered(dem.pixelCount(), 0);
   double sum_squares = 0;
@@ -20,14 +27,14 @@ TinErrorStatistics measureTin(const DemGrid& dem, const TinMesh& mesh) {
       ++stats.degenerate_triangles;
       continue;
     }
-    forEachCoveredPixel(dem, a, b, c, [&](std::size_t i, double surface_m) {
+    forEachPixel(t, [&](std::size_t i, double offset_m) {
       const float h = dem.heights_m[i];
       if (std::isnan(h)) {
         if (!(covered[i] & 2)) ++stats.covered_nodata_pixels;
         covered[i] |= 2;
         return true;
       }
-      const double error = std::fabs(surface_m - h);
+      const double error = std::fabs(offset_m);
       stats.max_error_m = std::max(stats.max_error_m, error);
       if (!(covered[i] & 1)) {
         covered[i] |= 1;
@@ -43,6 +50,25 @@ TinErrorStatistics measureTin(const DemGrid& dem, const TinMesh& mesh) {
   stats.rms_error_m =
       stats.measured_pixels ? std::sqrt(sum_squares / static_cast<double>(stats.measured_pixels)) : 0;
   return stats;
+}
+
+}  // namespace
+
+TinErrorStatistics measureTin(const DemGrid& dem, const TinMesh& mesh) {
+  const auto& idx = mesh.triangle_indices;
+  return measure(dem, mesh, [&](std::size_t t, auto&& visit) {
+    forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
+                        [&](std::size_t i, double surface_m) { return visit(i, surface_m - dem.heights_m[i]); });
+  });
+}
+
+TinErrorStatistics measureTin(const DemOnGlobe& globe, const TinMesh& mesh, std::span<const EcefPoint> vertex_ecef) {
+  TERRATILES_ASSERT(vertex_ecef.size() == mesh.vertices.size());
+  const auto& idx = mesh.triangle_indices;
+  return measure(globe.dem(), mesh, [&](std::size_t t, auto&& visit) {
+    forEachCoveredPixelOnGlobe(globe, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
+                               vertex_ecef[idx[t]], vertex_ecef[idx[t + 1]], vertex_ecef[idx[t + 2]], visit);
+  });
 }
 
 }  // namespace terratiles

@@ -2,17 +2,22 @@
 // measureTin: the vertical error of a TIN against its DEM, on every pixel.
 //
 // Rasterises every triangle of `mesh` (GridPoint frame: col, row in pixels) onto the DEM grid
-// and compares the linearly interpolated height with the DEM at each pixel centre the
-// triangle covers (a pixel on a shared edge is measured once per triangle touching it). Also
-// counts pixels no triangle covers and nodata pixels a triangle covers, so tests can assert
-// "every valid pixel is within E" and "no triangle covers nodata" from one pass. O(pixels
-// covered). Does not modify anything.
+// and measures it at each pixel centre the triangle covers (a pixel on a shared edge is
+// measured once per triangle touching it): on the globe, the offset from the pixel's DEM
+// point to the triangle's plane in ECEF along the pixel's vertical (the triangle as a
+// renderer draws it, DemOnGlobe); without a globe, the linearly interpolated height against
+// the DEM's. Also counts pixels no triangle covers and nodata pixels a triangle covers, so
+// tests can assert "every valid pixel is within E" and "no triangle covers nodata" from one
+// pass. O(pixels covered). Does not modify anything.
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <span>
 
 #include "src/dem/dem_grid.h"
+#include "src/geo/dem_on_globe.h"
+#include "src/geo/drawn_triangle.h"
 #include "src/tin/tin_mesh.h"
 
 namespace terratiles {
@@ -26,7 +31,10 @@ struct TinErrorStatistics {
   std::size_t degenerate_triangles = 0;    // zero area in the grid plane
 };
 
+// In the grid frame: heights interpolated linearly (a flat earth).
 TinErrorStatistics measureTin(const DemGrid& dem, const TinMesh& mesh);
+// On the globe: vertex_ecef holds every vertex of mesh placed by globe.place.
+TinErrorStatistics measureTin(const DemOnGlobe& globe, const TinMesh& mesh, std::span<const EcefPoint> vertex_ecef);
 
 // The DEM pixels the triangle (a, b, c) covers, by measureTin's rule: pixel centres at whole
 // (col, row) inside or on the triangle (barycentric weights >= -1e-9 relative), clipped to the
@@ -54,6 +62,26 @@ void forEachCoveredPixel(const DemGrid& dem, const GridPoint& a, const GridPoint
       if (!visit(dem.index(col, row), wa * a.height_m + wb * b.height_m + wc * c.height_m)) return;
     }
   }
+}
+
+// forEachCoveredPixel on the globe: the same pixels, each with the signed vertical offset of
+// the drawn triangle (corners pa, pb, pc in ECEF) from the pixel's DEM point (positive: the
+// triangle is above). A pixel on a pole row (DemOnGlobe::poleRow: all its pixels are one
+// point), and every pixel of a triangle degenerate in ECEF (two corners at a pole), is
+// measured in the grid: the linearly interpolated height minus the DEM's. A nodata pixel is
+// visited too (with an offset from its placeholder point).
+template <typename Visit>
+void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                                const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, Visit&& visit) {
+  const DrawnTriangle drawn(pa, pb, pc);
+  const DemGrid& dem = globe.dem();
+  const bool degenerate = drawn.degenerate();
+  forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double surface_m) {
+    if (degenerate || globe.poleRow(static_cast<std::int32_t>(pixel / static_cast<std::size_t>(dem.width)))) {
+      return visit(pixel, surface_m - static_cast<double>(dem.heights_m[pixel]));
+    }
+    return visit(pixel, drawn.offset(globe.point(pixel), globe.up(pixel)));
+  });
 }
 
 }  // namespace terratiles

@@ -35,6 +35,7 @@
 #include "src/lod/build_levels.h"
 #include "src/tin/build_tin.h"
 #include "src/tin/measure_tin.h"
+#include "src/geo/dem_on_globe.h"
 
 namespace terratiles {
 namespace {
@@ -229,12 +230,47 @@ void runTransform(const std::string& from, const std::string& to, const std::str
   out << std::flush;
 }
 
+// What DEM heights are relative to (--heights, --geoid), as build, tin and levels take it:
+// every error is measured on the globe, where a geoid turns orthometric heights ellipsoidal.
+struct HeightChoice {
+  std::string heights = "orthometric";
+  std::string geoid_path;  // empty: EGM96
+
+  // The geoid grid, or none for ellipsoidal heights. Throws Error(Usage) for --geoid with
+  // --heights ellipsoidal.
+  std::optional<GeoidGrid> geoid() const {
+    if (heights == "ellipsoidal") {
+      if (!geoid_path.empty()) {
+        throw Error(ErrorCode::Usage, "--geoid and --heights ellipsoidal exclude each other "
+                                      "(a geoid only applies to orthometric heights)");
+      }
+      return std::nullopt;
+    }
+    return readGeoidGrid(geoid_path.empty() ? kDefaultGeoidPath : geoid_path);
+  }
+};
+
+void addHeightOptions(CLI::App& command, std::string& heights, std::string& geoid_path) {
+  command
+      .add_option("--heights", heights,
+                  "What DEM heights are relative to: orthometric (above a geoid; converted to "
+                  "WGS84 ellipsoidal heights with --geoid) or ellipsoidal (used as they are)")
+      ->check(CLI::IsMember({"orthometric", "ellipsoidal"}))
+      ->capture_default_str();
+  command
+      .add_option("--geoid", geoid_path,
+                  "Geoid grid for orthometric heights, any GDAL raster in lon/lat (e.g. "
+                  "CHGeo2004 for LN02 heights) [default: EGM96, /usr/share/proj/egm96_15.gtx]")
+      ->check(CLI::ExistingFile);
+}
+
 struct TinCommandOptions {
   std::vector<std::string> inputs;
   std::string output;
   double max_error_m = 0.5;
   std::string constraints;  // break lines (OGR vector file), or empty
   bool force = false;
+  HeightChoice heights;
 };
 
 // `terratiles tin`: DEM -> greedy-insertion TIN -> OFF/OBJ/PLY in the DEM's CRS.
@@ -247,11 +283,19 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   }
   progress.beginStage("reading DEM", 0);
   DemGrid dem = readDem(options.inputs);
+  const std::optional<GeoidGrid> geoid = options.heights.geoid();
   progress.endStage();
-  TinMesh mesh = buildFinestTin(dem, options.max_error_m, options.constraints, progress).mesh;
-  progress.beginStage("checking every pixel", 0);
-  const TinErrorStatistics errors = measureTin(dem, mesh);
-  progress.endStage();
+  TinErrorStatistics errors;
+  TinMesh mesh;
+  {
+    const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+    mesh = buildFinestTin(dem, &globe, options.max_error_m, options.constraints, progress).mesh;
+    progress.beginStage("checking every pixel", 0);
+    std::vector<EcefPoint> ecef(mesh.vertices.size());
+    globe.place(mesh.vertices, {}, ecef);
+    errors = measureTin(globe, mesh, ecef);
+    progress.endStage();
+  }
   const std::size_t vertex_count = mesh.vertices.size(), triangle_count = mesh.triangleCount();
   dem.heights_m = {};  // not needed any more
   writeTinFile(mesh, dem.origin_x, dem.origin_y, dem.pixel_size_x, options.output);
@@ -287,6 +331,7 @@ struct LevelsCommandOptions {
   bool force = false;
   int threads = 0;  // 0: all cores
   LevelOptions levels;
+  HeightChoice heights;
 };
 
 // `terratiles levels`: DEM -> TIN -> the cluster levels of detail, each written as a TIN file
@@ -300,8 +345,11 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   OutputDirectory directory(options.output, options.force, "levels.json");
   progress.beginStage("reading DEM", 0);
   const DemGrid dem = readDem(options.inputs);
+  const std::optional<GeoidGrid> geoid = options.heights.geoid();
   progress.endStage();
-  ConstrainedTin finest = buildFinestTin(dem, options.tin_max_error_m, options.constraints, progress);
+  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  options.levels.globe = &globe;
+  ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
   TinMesh tin = std::move(finest.mesh);
   options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
   if (options.level_error_growth > 0) {
@@ -458,18 +506,8 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->add_option("--max-zoom", build.max_zoom,
                    "Finest zoom (-1: from the data: --tile-triangles, or for --lod grid one root tile)")
       ->capture_default_str();
-  std::string heights_choice = "orthometric";
-  build_command
-      ->add_option("--heights", heights_choice,
-                   "What DEM heights are relative to: orthometric (above a geoid; converted to "
-                   "WGS84 ellipsoidal heights with --geoid) or ellipsoidal (used as they are)")
-      ->check(CLI::IsMember({"orthometric", "ellipsoidal"}))
-      ->capture_default_str();
-  build_command
-      ->add_option("--geoid", build.geoid_path,
-                   "Geoid grid for orthometric heights, any GDAL raster in lon/lat (e.g. "
-                   "CHGeo2004 for LN02 heights) [default: EGM96, /usr/share/proj/egm96_15.gtx]")
-      ->check(CLI::ExistingFile);
+  HeightChoice build_heights;
+  addHeightOptions(*build_command, build_heights.heights, build.geoid_path);
   build_command->add_flag("--implicit", build.implicit_tiling,
                           "Geographic scheme: write 3D Tiles implicit tiling (quadtree, subtree files with tile and "
                           "content availability, each tile's measured error and region as tile metadata)");
@@ -538,6 +576,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Largest vertical error in metres allowed at any pixel")
       ->capture_default_str();
   tin_command->add_option("--constraints", tin.constraints, kConstraintsHelp);
+  addHeightOptions(*tin_command, tin.heights.heights, tin.heights.geoid_path);
   tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
   addProgressOptions(*tin_command, quiet, progress_choice);
 
@@ -587,6 +626,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "(the paper's stand-in for roads and buildings)")
       ->capture_default_str();
   levels_command->add_option("--constraints", levels.constraints, kConstraintsHelp);
+  addHeightOptions(*levels_command, levels.heights.heights, levels.heights.geoid_path);
   levels_command->add_option("--seed", levels.levels.seed, "Seed of METIS and of the random choices")
       ->capture_default_str();
   levels_command->add_option("--format", levels.format, "TIN file format: ply (binary), off or obj")
@@ -696,7 +736,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     build.lod = lod_choice == "grid" ? LodMethod::Grid : LodMethod::Clusters;
     build.scheme = parseTileSchemeKind(scheme_choice);
     build.assignment = parseAssignment(assign_choice);
-    if (heights_choice == "ellipsoidal") {
+    if (build_heights.heights == "ellipsoidal") {
       if (!build.geoid_path.empty()) {
         throw Error(ErrorCode::Usage, "--geoid and --heights ellipsoidal exclude each other "
                                       "(a geoid only applies to orthometric heights)");

@@ -1,0 +1,67 @@
+#pragma once
+// forEachPixelMeeting: the DEM pixels whose verticals meet a drawn triangle (DrawnTriangle,
+// DemOnGlobe), and the triangle's vertical error at each: what a renderer draws above the
+// pixel, measured along the pixel's vertical. The tiles of a build are measured this way and
+// so is every decoded tile in `terratiles check`, with the same arithmetic on the same
+// numbers, so the two agree bit for bit.
+//
+// Which pixels to test: the box of the corners' grid positions grown by how far the drawn
+// triangle's footprint can stray from the straight triangle in the grid: its chord's sideways
+// bulge (a chord of length L bulges by about L^2 tan(lat) / (8 R) in a lon/lat grid, much less
+// in a projected one; bounded here by L^2 (1 + |tan lat|) / (2 R)) plus `shift_m`, how far the
+// corners' grid positions may be from the drawn corners (a build passes the positions before
+// quantisation: the quantisation step; the check passes the decoded corners: 0). A corner at
+// a pole has no column: the box then runs from the pole row to the other corners, between
+// their columns the short way round. Columns of a DEM that spans 360 degrees of longitude
+// wrap.
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+
+#include "src/geo/dem_on_globe.h"
+#include "src/geo/drawn_triangle.h"
+
+namespace terratiles {
+
+struct GridCorner {
+  double col = 0;
+  double row = 0;
+  bool at_pole = false;  // at a pole: col means nothing
+};
+
+// Pixels [col0, col1] x [row0, row1]; columns outside [0, width) are taken modulo the width
+// when the DEM wraps around the globe (DemOnGlobe::wrapsLongitude), else clipped.
+struct PixelBox {
+  std::int64_t col0 = 0, col1 = -1;
+  std::int32_t row0 = 0, row1 = -1;
+};
+
+PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                         double shift_m);
+
+// visit(pixel index, signed offset: the triangle above the DEM point when positive) for every
+// pixel of `box` whose vertical meets `triangle`, row by row.
+template <typename Visit>
+void forEachPixelMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const PixelBox& box, Visit&& visit) {
+  if (triangle.degenerate()) return;
+  const DemGrid& dem = globe.dem();
+  const bool wraps = globe.wrapsLongitude();
+  for (std::int32_t row = std::max(0, box.row0); row <= std::min(dem.height - 1, box.row1); ++row) {
+    for (std::int64_t c = box.col0; c <= box.col1; ++c) {
+      std::int64_t col = c;
+      if (wraps) {
+        col %= dem.width;
+        if (col < 0) col += dem.width;
+      } else if (col < 0 || col >= dem.width) {
+        continue;
+      }
+      const std::size_t pixel = dem.index(static_cast<std::int32_t>(col), row);
+      double offset_m = 0;
+      if (triangle.meets(globe.point(pixel), globe.up(pixel), &offset_m)) visit(pixel, offset_m);
+    }
+  }
+}
+
+}  // namespace terratiles

@@ -1,0 +1,81 @@
+#pragma once
+// What a renderer draws from tiles, measured against the DEM (DESIGN.md 5): the build
+// measures every tile this way on the positions its GLB will decode to, and `terratiles
+// check` measures every decoded tile the same way, so a tile's geometricError bounds its
+// decoded error with no slack, and the check agrees to the bit.
+//
+//   error      at every DEM pixel whose vertical meets one of the tile's triangles (as drawn,
+//              straight in ECEF; forEachPixelMeeting): |offset| from the pixel's DEM point;
+//   finer      where the next finer zoom is drawn over the same pixel too: the largest
+//              difference between this tile's offsets and that zoom's there (ZoomSurface), so
+//              that contents a viewer draws side by side agree within the coarser tile's
+//              geometricError;
+//   region     every point of every triangle: the vertices, the lowest point of each
+//              triangle (a chord sags below its corners) and each edge's point nearest a pole
+//              (a chord bulges poleward), and a pole itself when a triangle holds it.
+
+#include <atomic>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <vector>
+
+#include "src/geo/dem_on_globe.h"
+#include "src/geo/drawn_pixels.h"
+#include "tileset/tileset.h"
+
+namespace terratiles {
+
+// Per DEM pixel of one zoom: the lowest and highest offset of the zoom's drawn surface above
+// the pixel's DEM point (metres; over every triangle of every tile whose vertical meets the
+// pixel), rounded outward to float; NaN where the zoom draws nothing there.
+class ZoomSurface {
+ public:
+  explicit ZoomSurface(std::size_t pixels = 0)
+      : low_(pixels, std::numeric_limits<float>::quiet_NaN()), high_(pixels, std::numeric_limits<float>::quiet_NaN()) {}
+
+  bool empty() const { return low_.empty(); }
+  bool drawn(std::size_t pixel) const { return !std::isnan(low_[pixel]); }
+  float low(std::size_t pixel) const { return low_[pixel]; }
+  float high(std::size_t pixel) const { return high_[pixel]; }
+  // The largest |offset| there (0 where nothing is drawn).
+  double error(std::size_t pixel) const {
+    return drawn(pixel) ? std::max(std::fabs(static_cast<double>(low_[pixel])), std::fabs(static_cast<double>(high_[pixel])))
+                        : 0.0;
+  }
+  // The largest |offset - o| over the offsets o drawn at the pixel (0 where none).
+  double differenceTo(std::size_t pixel, double offset_m) const {
+    if (!drawn(pixel)) return 0;
+    return std::max(std::fabs(offset_m - low_[pixel]), std::fabs(offset_m - high_[pixel]));
+  }
+  // Adds an offset drawn at the pixel. Safe from several threads at once.
+  void include(std::size_t pixel, double offset_m);
+
+ private:
+  std::vector<float> low_, high_;
+};
+
+struct DrawnTileMeasure {
+  double max_error_m = 0;
+  double sum_squares = 0;  // of the offsets, over the hits
+  std::size_t hits = 0;    // pixel and triangle pairs (a pixel on a shared edge counts twice)
+  std::size_t finer_hits = 0;  // of those, where the finer zoom is drawn too
+  double finer_difference_m = 0;
+  double rmsError() const { return hits ? std::sqrt(sum_squares / static_cast<double>(hits)) : 0.0; }
+};
+
+// Measures a tile's triangles (`indices`, 3 per triangle, into `vertices`: ECEF as decoded,
+// and `grid`: their positions in the DEM's grid, at most `shift_m` from the drawn ones). Adds
+// every offset to `surface` (when not null) and compares with `finer` (when not null).
+DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
+                                  std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
+                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface);
+
+// The region holding every drawn point of the triangles (see the header comment), grown by a
+// millimetre and 1e-10 rad against rounding. A vertex at a pole (|lat| within 1e-9 deg of 90)
+// adds no longitude.
+Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices);
+
+}  // namespace terratiles
