@@ -57,11 +57,15 @@ std::vector<std::array<double, 2>> TileFrame::toScheme(std::span<const GridPoint
   to_wgs84_->transform(crs, geodetic);
   // Web Mercator ends at +-85.0511 deg: data beyond (a global DEM's polar caps) goes to the
   // tiles of the first and last rows, as web maps draw it.
-  const double limit = kind_ == TileSchemeKind::WebMercator ? kWebMercatorMaxLatitudeDeg : 90.0;
   for (std::size_t i = 0; i < points.size(); ++i) {
-    out[i] = {geodetic[i].lon_deg, std::clamp(geodetic[i].lat_deg, -limit, limit)};
+    out[i] = {geodetic[i].lon_deg, insideLatitude(geodetic[i].lat_deg)};
   }
   return out;
+}
+
+double TileFrame::insideLatitude(double lat_deg) const {
+  const double limit_deg = kind_ == TileSchemeKind::WebMercator ? kWebMercatorMaxLatitudeDeg : 90.0;
+  return std::isfinite(lat_deg) ? std::clamp(lat_deg, -limit_deg, limit_deg) : lat_deg;
 }
 
 TileKey TileFrame::tileAt(std::array<double, 2> point, std::int32_t zoom) const {
@@ -71,12 +75,15 @@ TileKey TileFrame::tileAt(std::array<double, 2> point, std::int32_t zoom) const 
     return terratiles::tileAt(local_, std::clamp(point[0], root.west, root.east),
                               std::clamp(point[1], root.south, root.north), zoom);
   }
-  return terratiles::tileAt(kind_, point[0], point[1], zoom);
+  // The point is one of toScheme's or computed from them (a cluster centroid): its latitude
+  // can be past the clamped edge by rounding only (see the class comment).
+  return terratiles::tileAt(kind_, point[0], insideLatitude(point[1]), zoom);
 }
 
 std::vector<TileKey> TileFrame::tilesIntersecting(const TileBounds& box, std::int32_t zoom) const {
   if (kind_ == TileSchemeKind::Local) return terratiles::tilesIntersecting(local_, box, zoom);
-  return terratiles::tilesIntersecting(kind_, LonLatBox{box.west, box.south, box.east, box.north}, zoom);
+  return terratiles::tilesIntersecting(
+      kind_, LonLatBox{box.west, insideLatitude(box.south), box.east, insideLatitude(box.north)}, zoom);
 }
 
 namespace {
@@ -207,6 +214,9 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
       sum[1] += area * (a[1] + b[1] + c[1]) / 3;
       sum[2] += area;
     }
+    // A cluster whose faces all sit on the clamped Web Mercator edge has zero-area faces
+    // (weight 1e-30 each): its mean latitude can round hundreds of ulps past the edge, which
+    // frame.tileAt takes back into the first or last row.
     for (std::size_t c = 0; c < sums.size(); ++c) {
       own_cluster_tiles[c] = frame.tileAt({sums[c][0] / sums[c][2], sums[c][1] / sums[c][2]}, zoom);
     }
