@@ -55,6 +55,7 @@ constexpr double kBaseMarginPx = 2;
 constexpr std::size_t kSamplesPerTriangle = 3 + 3 * (kEdgeSamples + 2) + 66;
 constexpr double kWgs84A = 6378137.0;
 constexpr double kWgs84B = 6356752.314245179;
+constexpr double kWgs84E2 = 1 - kWgs84B * kWgs84B / (kWgs84A * kWgs84A);
 // What "provably inside" keeps clear of the region's faces (rounding of the conversions).
 constexpr double kSafeHeightM = 1e-6;
 constexpr double kSafeAngleRad = 1e-12;
@@ -550,9 +551,18 @@ class TileMeasure {
     // Geographic grid. Rows: all six points (a pole point's row is right; only its
     // longitude is lost), grown by the bulge and the latitude difference's variation.
     const bool around_axis = aroundAxis(ecef[0], ecef[1], ecef[2]);
+    // The pole it reaches: that of its pole vertex, or where the axis crosses its plane.
+    bool north = true;
+    if (pole) {
+      for (std::size_t k = 0; k < 3; ++k) {
+        if (at_pole[k]) north = ecef[k].z > 0;
+      }
+    } else if (around_axis) {
+      const Vec3 n = cross(ecef[1] - ecef[0], ecef[2] - ecef[0]);
+      north = n.z != 0 ? dot(n, ecef[0]) / n.z > 0 : ecef[0].z > 0;
+    }
     if (around_axis || pole) {  // reaches the pole row on its side
-      const double pole_row = (dem.origin_y - (ecef[0].z + ecef[1].z + ecef[2].z > 0 ? 90.0 : -90.0)) /
-                                  dem.pixel_size_y - 0.5;
+      const double pole_row = (dem.origin_y - (north ? 90.0 : -90.0)) / dem.pixel_size_y - 0.5;
       row_min = std::min(row_min, pole_row);
       row_max = std::max(row_max, pole_row);
     }
@@ -590,11 +600,12 @@ class TileMeasure {
       pushBox(r0, r1, reference + rel_min - col_margin, reference + rel_max + col_margin, boxes);
       return;
     }
-    // With a vertex at a pole: the pole rows whole, the other rows the others' columns.
+    // With a vertex at a pole: that pole's rows whole, the other rows the others' columns.
     std::int32_t first_pole = -1, last_pole = -1;
     for (std::int32_t row = std::max<std::int32_t>(0, static_cast<std::int32_t>(std::floor(r0)));
          row <= std::min<std::int32_t>(dem.height - 1, static_cast<std::int32_t>(std::ceil(r1))); ++row) {
       if (!c_.pole_row[static_cast<std::size_t>(row)] || row < r0 || row > r1) continue;
+      if ((dem.pixelCentre(0, row).y > 0) != north) continue;
       if (first_pole < 0) first_pole = row;
       last_pole = row;
     }
@@ -725,6 +736,14 @@ class TileMeasure {
             }
             const Vec3 w = a - p;
             const double height = dot(normal, w) / along;  // t: P + t n is on the plane
+            // The vertical ends where it reaches the polar axis, t = -(N + h) (beyond, its
+            // points have other latitudes and longitudes: it crosses the Earth). Only a far
+            // point can be there (N + h > 6300 km).
+            if (height < -1e6) {
+              const double sin2 = up.z * up.z;
+              const double radius = kWgs84A / std::sqrt(1 - kWgs84E2 * sin2);  // N
+              if (height <= -(dot(p, up) + radius * kWgs84E2 * sin2)) continue;
+            }
             const Vec3 x = (p - a) + height * up;           // X - A
             const double x1 = dot(x, e1), x2 = dot(x, e2);
             const double bv = (d11 * x1 - d01 * x2) * inverse, bw = (d00 * x2 - d01 * x1) * inverse;

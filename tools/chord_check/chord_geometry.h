@@ -16,7 +16,10 @@
 //    vertical is the WGS84 ellipsoid normal n = (cos lat cos lon, cos lat sin lon, sin lat)
 //    at P's geodetic lat/lon. The vertical meets triangle ABC when P + t n hits ABC's plane at
 //    a point X inside the closed triangle (3D barycentric coordinates >= -1e-9); the error
-//    is |t|. A tile's worst error is the max over its triangles and the pixels meeting them;
+//    is |t|. The vertical is the half-line of the points with P's latitude and longitude,
+//    t > -(N + h), where it reaches the polar axis: the rest of the line crosses the Earth
+//    (the vertical of a pixel at the north pole is the axis, which meets every south-pole
+//    vertex 12,700 km away). A tile's worst error is the max over its triangles and the pixels meeting them;
 //    its ratio is worst / geometricError; a tile is "over" when worst > geometricError, with
 //    no tolerance. Nodata pixels are skipped; triangles whose plane holds the vertical
 //    (degenerate or vertical faces) meet no pixel and are counted apart.
