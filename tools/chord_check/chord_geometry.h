@@ -19,9 +19,9 @@
 //    is |t|. The vertical is the half-line of the points with P's latitude and longitude,
 //    t > -(N + h), where it reaches the polar axis: the rest of the line crosses the Earth
 //    (the vertical of a pixel at the north pole is the axis, which meets every south-pole
-//    vertex 12,700 km away). A tile's worst error is the max over its triangles and the pixels meeting them;
-//    its ratio is worst / geometricError; a tile is "over" when worst > geometricError, with
-//    no tolerance. Nodata pixels are skipped; triangles whose plane holds the vertical
+//    vertex 12,700 km away). A tile's worst error is the max over its triangles and the
+//    pixels meeting them; its ratio is worst / geometricError (inf for geometricError 0);
+//    a tile is "over" when worst > geometricError, with no tolerance. Nodata pixels are skipped; triangles whose plane holds the vertical
 //    (degenerate or vertical faces) meet no pixel and are counted apart.
 //    Candidate pixels of a triangle: the bounding box on the DEM grid of its vertices and its
 //    edges' points of largest |geocentric latitude| (ECEF -> geodetic, GeographicLib, ->
@@ -34,7 +34,7 @@
 //    stays between its vertices' longitudes (the short way round); they wrap round a DEM
 //    spanning 360 degrees. Its rows also get the geodetic/geocentric latitude difference's
 //    variation over the triangle's heights. A vertex at a pole (within max(0.11 m, 4 position
-//    steps) of the axis) has no longitude: its triangle takes the pole row(s) whole and, for
+//    steps) of the axis) has no longitude: its triangle takes that pole's rows whole and, for
 //    the other rows, the columns its other vertices span; a triangle around the axis takes
 //    every column of the rows from the pole on.
 // 2. Regions hold their content (metres). Samples of every triangle: its vertices, 15 points
@@ -59,7 +59,8 @@
 //
 // Cost: every pixel is placed once (parallel in row blocks); tiles and their triangles run
 // in parallel (TBB), each thread with its own CRS transformations. Memory: 48 bytes per DEM
-// pixel plus one tile's decoded mesh per thread. Deterministic for any thread count.
+// pixel, 1 per pixel and zoom (which pixels are met), and one tile's decoded mesh per
+// thread (ETOPO5, 9.3 M pixels and 5 zooms: 0.7 GB). Deterministic for any thread count.
 // Throws Error(Input) with a one-line message for a directory that is not a terratiles
 // output, an unreadable DEM, geoid or tile, and Error(Cancelled) when progress is cancelled.
 

@@ -13,12 +13,14 @@ namespace terratiles {
 namespace {
 
 constexpr const char* kUsage =
-    "usage: terratiles_chord_check OUTDIR [--json] [--extra-margin-px N] [-q]\n"
+    "usage: terratiles_chord_check OUTDIR [--json] [--extra-margin-px N] [--convert-every-sample] [-q]\n"
     "  Decodes every tile of a terratiles output and measures, in ECEF, each tile's error at\n"
     "  the DEM pixel verticals against its geometricError, whether its region holds samples of\n"
     "  every triangle, and how far chords sag below the surface through their corners.\n"
     "  --json               one JSON object instead of the table\n"
     "  --extra-margin-px N  pixels added to every triangle's candidate margin (default 0)\n"
+    "  --convert-every-sample  convert every region sample, also of triangles provably\n"
+    "                       inside their region (slower; the same counts)\n"
     "  -q, --quiet          no progress on stderr\n"
     "  exit: 0 ok, 5 a tile over its geometricError or a sample outside its region,\n"
     "        2 usage, 3 bad input, 1 internal, 130 interrupted\n";
@@ -48,6 +50,8 @@ int runChordCheck(const std::vector<std::string>& args, std::ostream& out, std::
         return 0;
       } else if (arg == "--json") {
         as_json = true;
+      } else if (arg == "--convert-every-sample") {
+        options.convert_every_sample = true;
       } else if (arg == "-q" || arg == "--quiet") {
         quiet = true;
       } else if (arg == "--extra-margin-px") {

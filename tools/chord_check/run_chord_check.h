@@ -2,7 +2,7 @@
 // runChordCheck: the terratiles_chord_check command line as a testable function (main.cpp
 // is a thin wrapper).
 //
-//   terratiles_chord_check OUTDIR [--json] [--extra-margin-px N] [-q]
+//   terratiles_chord_check OUTDIR [--json] [--extra-margin-px N] [--convert-every-sample] [-q]
 //
 // Measures OUTDIR's decoded chords (tools/chord_check/chord_geometry.h) and prints the table,
 // or with --json one JSON object, on `out`. Progress goes to stderr on a terminal (never with
