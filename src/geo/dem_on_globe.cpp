@@ -27,8 +27,7 @@ struct DemOnGlobe::Transforms {
 UnitVector ellipsoidNormal(const GeodeticPoint& point) {
   constexpr double kDegToRad = std::numbers::pi / 180.0;
   const double lat = point.lat_deg * kDegToRad, lon = point.lon_deg * kDegToRad;
-  return {static_cast<float>(std::cos(lat) * std::cos(lon)), static_cast<float>(std::cos(lat) * std::sin(lon)),
-          static_cast<float>(std::sin(lat))};
+  return {std::cos(lat) * std::cos(lon), std::cos(lat) * std::sin(lon), std::sin(lat)};
 }
 
 DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* progress)
@@ -50,9 +49,8 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
   }
 
   const std::size_t pixels = dem.pixelCount();
-  for (auto* v : {&x_, &y_, &z_}) v->assign(pixels + kDemOnGlobePadding, 0.0);
-  for (auto* v : {&up_x_, &up_y_}) v->assign(pixels + kDemOnGlobePadding, 0.0f);
-  up_z_.assign(pixels + kDemOnGlobePadding, 1.0f);
+  for (auto* v : {&x_, &y_, &z_, &up_x_, &up_y_}) v->assign(pixels + kDemOnGlobePadding, 0.0);
+  up_z_.assign(pixels + kDemOnGlobePadding, 1.0);
   pole_rows_.assign(static_cast<std::size_t>(dem.height), 0);
   if (progress) progress->beginStage("placing the DEM's pixels on the globe", static_cast<std::uint64_t>(dem.height));
   constexpr std::int32_t kRows = 16;

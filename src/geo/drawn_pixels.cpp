@@ -6,10 +6,44 @@
 
 namespace terratiles {
 
+PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                        double shift_m) {
+  const DemGrid& dem = globe.dem();
+  constexpr double kRadius_m = 6.3e6;  // below every WGS84 radius of curvature
+  double row_min = 1e300, row_max = -1e300;
+  // tan of the latitude of the corner nearest a pole, from the verticals of the pixels at the
+  // corners (sin lat is the vertical's z).
+  double sin_lat = 0;
+  for (const GridCorner& corner : corners) {
+    row_min = std::min(row_min, corner.row);
+    row_max = std::max(row_max, corner.row);
+    if (corner.at_pole) continue;
+    const auto col = static_cast<std::int32_t>(std::clamp(std::round(corner.col), 0.0, dem.width - 1.0));
+    const auto row = static_cast<std::int32_t>(std::clamp(std::round(corner.row), 0.0, dem.height - 1.0));
+    sin_lat = std::max(sin_lat, std::fabs(globe.up(dem.index(col, row))[2]));
+  }
+  const double tan_lat = std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
+  const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
+  const double margin_m = bulge_m + shift_m;
+  // Over the smallest spacings of the rows the footprint can span.
+  const auto first_row = static_cast<std::int32_t>(std::clamp(std::floor(row_min) - 1, 0.0, dem.height - 1.0));
+  const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
+  double row_spacing = std::numeric_limits<double>::infinity(), column_spacing = row_spacing;
+  for (std::int32_t row = first_row; row <= last_row; ++row) {
+    if (row < dem.height - 1) row_spacing = std::min(row_spacing, globe.rowSpacing(row));
+    if (!globe.poleRow(row)) column_spacing = std::min(column_spacing, globe.columnSpacing(row));
+  }
+  PixelMargin margin;
+  margin.rows = row_spacing > 0 ? margin_m / row_spacing : static_cast<double>(dem.height);
+  margin.columns = column_spacing > 0 && std::isfinite(column_spacing) ? margin_m / column_spacing
+                                                                       : static_cast<double>(dem.width);
+  if (!std::isfinite(margin.rows)) margin.rows = 0;  // a single row
+  return margin;
+}
+
 PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
                          double shift_m) {
   const DemGrid& dem = globe.dem();
-  constexpr double kRadius_m = 6.3e6;  // below every WGS84 radius of curvature
   double row_min = 1e300, row_max = -1e300, col_min = 1e300, col_max = -1e300;
   bool at_pole = false;
   for (const GridCorner& corner : corners) {
@@ -24,29 +58,8 @@ PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3
   }
   PixelBox box;
   if (!(col_min <= col_max) || !(row_min <= row_max)) return box;  // no corner with a column: nothing
-  // tan of the latitude of the corner nearest a pole, from the verticals of the pixels at the
-  // corners (sin lat is the vertical's z).
-  double sin_lat = 0;
-  for (const GridCorner& corner : corners) {
-    if (corner.at_pole) continue;
-    const auto col = static_cast<std::int32_t>(std::clamp(std::round(corner.col), 0.0, dem.width - 1.0));
-    const auto row = static_cast<std::int32_t>(std::clamp(std::round(corner.row), 0.0, dem.height - 1.0));
-    sin_lat = std::max(sin_lat, std::fabs(static_cast<double>(globe.up(dem.index(col, row))[2])));
-  }
-  const double tan_lat = std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
-  const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
-  const double margin_m = bulge_m + shift_m;
-  // In rows: over the smallest row spacing the box can span.
-  const auto first_row = static_cast<std::int32_t>(std::max(0.0, std::floor(row_min) - 1));
-  const auto last_row = static_cast<std::int32_t>(std::min(dem.height - 1.0, std::ceil(row_max) + 1));
-  double row_spacing = std::numeric_limits<double>::infinity(), column_spacing = row_spacing;
-  for (std::int32_t row = first_row; row <= last_row; ++row) {
-    if (row < dem.height - 1) row_spacing = std::min(row_spacing, globe.rowSpacing(row));
-    if (!globe.poleRow(row)) column_spacing = std::min(column_spacing, globe.columnSpacing(row));
-  }
-  const double margin_rows = row_spacing > 0 ? margin_m / row_spacing : static_cast<double>(dem.height);
-  const double margin_cols = column_spacing > 0 && std::isfinite(column_spacing) ? margin_m / column_spacing
-                                                                                   : static_cast<double>(dem.width);
+  const PixelMargin margin = strayMargin(globe, corners, longest_edge_m, shift_m);
+  const double margin_rows = margin.rows, margin_cols = margin.columns;
   box.row0 = static_cast<std::int32_t>(std::max(0.0, std::ceil(row_min - margin_rows - 1e-9)));
   box.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, std::floor(row_max + margin_rows + 1e-9)));
   if (at_pole) {

@@ -41,6 +41,15 @@ struct PixelBox {
 PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
                          double shift_m);
 
+// How far (in columns and rows) a drawn triangle's footprint may stray from its triangle in
+// the grid: the bulge and shift above, over the smallest pixel spacing of the rows it spans.
+struct PixelMargin {
+  double columns = 0;
+  double rows = 0;
+};
+PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                        double shift_m);
+
 // visit(pixel index, signed offset: the triangle above the DEM point when positive) for every
 // pixel of `box` whose vertical meets `triangle`, row by row.
 template <typename Visit>

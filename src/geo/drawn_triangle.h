@@ -45,19 +45,27 @@ struct DrawnTriangle {
   }
 
   bool degenerate() const { return degenerate_; }
+  // The corners in the triangle's own order (a first).
+  const EcefPoint& corner(int k) const { return k == 0 ? a : k == 1 ? b_ : c_; }
   // The longest edge, metres.
   double longestEdge() const { return std::sqrt(longest2_); }
 
   // Signed distance along `up` (unit) from `point` to the plane; NaN when up runs along it.
+  // A corner's own point is on the plane: 0 (whatever the rounding, which a plane that nearly
+  // holds the vertical, at a pole, would blow up).
   template <typename Up>
   double offset(const EcefPoint& point, const Up& up) const {
+    if (isCorner(point)) return 0;
     const double along = normal[0] * up[0] + normal[1] * up[1] + normal[2] * up[2];
     if (along == 0) return std::numeric_limits<double>::quiet_NaN();
     return (normal[0] * (a.x - point.x) + normal[1] * (a.y - point.y) + normal[2] * (a.z - point.z)) / along;
   }
 
-  // Whether the line point + t * up meets the closed triangle; if so, *offset = t.
+  // Whether the line point + t * up meets the closed triangle within kReach of the point; if
+  // so, *offset = t. (Every vertical crosses the polar axis some 6,400 km down and reaches the
+  // far side of the globe: what it meets there is not drawn above the point.)
   // Moeller-Trumbore: a + u ab + v ac = point + t up.
+  static constexpr double kReach_m = 3.2e6;
   template <typename Up>
   bool meets(const EcefPoint& point, const Up& up, double* offset_m) const {
     constexpr double kTolerance = 1e-9;
@@ -76,12 +84,19 @@ struct DrawnTriangle {
     // The plane's offset from the point, as offset() computes it (the same bits for the
     // same pair, whichever of the two a caller uses).
     *offset_m = offset(point, up);
-    return std::isfinite(*offset_m);
+    return std::fabs(*offset_m) <= kReach_m;
   }
 
  private:
+  bool isCorner(const EcefPoint& p) const {
+    return (p.x == a.x && p.y == a.y && p.z == a.z) || (p.x == b_.x && p.y == b_.y && p.z == b_.z) ||
+           (p.x == c_.x && p.y == c_.y && p.z == c_.z);
+  }
+
   void set(const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc) {
     a = pa;
+    b_ = pb;
+    c_ = pc;
     ab = {pb.x - pa.x, pb.y - pa.y, pb.z - pa.z};
     ac = {pc.x - pa.x, pc.y - pa.y, pc.z - pa.z};
     normal = {ab[1] * ac[2] - ab[2] * ac[1], ab[2] * ac[0] - ab[0] * ac[2], ab[0] * ac[1] - ab[1] * ac[0]};
@@ -92,6 +107,7 @@ struct DrawnTriangle {
     degenerate_ = !(area2_squared > 1e-24 * longest2_ * longest2_);
   }
 
+  EcefPoint b_, c_;
   double longest2_ = 0;
   bool degenerate_ = true;
 };

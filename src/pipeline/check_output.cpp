@@ -214,31 +214,42 @@ void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
     lattice[v].row = row;
   }
 
-  // Coverage: the grid pixels inside its triangles; a triangle with a pole vertex (no
-  // column) covers the pixels whose verticals meet it.
+  // Coverage: the pixels inside its triangles in the grid and the pixels whose verticals
+  // meet its triangles as drawn (a triangle with a pole vertex has no place in the grid; a
+  // long chord strays from its grid triangle by its bulge, far from a pole too).
   std::vector<std::uint32_t> covered;
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    const std::uint32_t a = idx[t], b = idx[t + 1], c = idx[t + 2];
-    const auto add = [&](std::size_t pixel) {
+  const auto rasterise = [&](const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+    forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double) {
       if (!std::isnan(dem.heights_m[pixel])) covered.push_back(static_cast<std::uint32_t>(pixel));
-    };
-    if (at_pole[a] || at_pole[b] || at_pole[c]) {
-      const DrawnTriangle triangle(ecef[a], ecef[b], ecef[c]);
-      const PixelBox box = candidatePixels(globe, {grid[a], grid[b], grid[c]}, triangle.longestEdge(), 1e-3);
-      forEachPixelMeeting(globe, triangle, box, [&](std::size_t pixel, double) { add(pixel); });
-      continue;
-    }
-    forEachCoveredPixel(dem, lattice[a], lattice[b], lattice[c], [&](std::size_t pixel, double) {
-      add(pixel);
       return true;
     });
+  };
+  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    const std::uint32_t corner[3] = {idx[t], idx[t + 1], idx[t + 2]};
+    const int poles = at_pole[corner[0]] + at_pole[corner[1]] + at_pole[corner[2]];
+    if (poles == 0) {
+      rasterise(lattice[corner[0]], lattice[corner[1]], lattice[corner[2]]);
+      continue;
+    }
+    if (poles > 1) continue;
+    // One corner at a pole: in the grid, the triangle is the quad between the other two
+    // corners' meridians, from their edge to the pole row (a chord from a pole runs along a
+    // meridian).
+    int k = 0;
+    while (!at_pole[corner[k]]) ++k;
+    const GridPoint& v1 = lattice[corner[(k + 1) % 3]];
+    const GridPoint& v2 = lattice[corner[(k + 2) % 3]];
+    if (std::fabs(v1.col - v2.col) > dem.width / 2.0) continue;  // across the seam: left to the verticals
+    const double pole_row = lattice[corner[k]].row;
+    rasterise({v1.col, pole_row, 0}, {v2.col, pole_row, 0}, v2);
+    rasterise({v1.col, pole_row, 0}, v2, v1);
   }
+  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them).
+  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface, &covered);
   std::sort(covered.begin(), covered.end());
   covered.erase(std::unique(covered.begin(), covered.end()), covered.end());
   tile.pixels = std::move(covered);
 
-  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them).
-  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface);
   const Region content = drawnRegion(ecef, idx);
   const auto& r = tile.region;
   tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&

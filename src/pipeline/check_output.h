@@ -11,8 +11,10 @@
 // centre, so outlines meet exactly in the grid. (An outline vertex a coarser level moved
 // before it was locked is not one; counted.) A vertex at a pole (a geographic DEM's first or
 // last row) has no column. Then:
-//   1. coverage: every tile's content covers the pixels inside its triangles in the grid (a
-//      triangle with a pole vertex: the pixels whose verticals meet it). `cuts` random cuts of
+//   1. coverage: every tile's content covers the pixels inside its triangles in the grid and
+//      the pixels whose verticals meet its triangles as drawn (a triangle with a pole vertex
+//      has no place in the grid; a long chord strays from its grid triangle by its bulge,
+//      poleward: at high latitudes by several columns). `cuts` random cuts of
 //      the tile tree (a set of tiles whose squares tile the data, as a viewer draws them)
 //      whose neighbours are at most one zoom apart, and one cut per zoom made of that zoom
 //      alone, must cover every footprint pixel (a valid pixel the finest zoom covers); cuts

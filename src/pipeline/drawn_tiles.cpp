@@ -11,6 +11,9 @@ namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kPoleDeg = 90 - 1e-9;
+// WGS84: semi-major axis and first eccentricity squared.
+constexpr double kA = 6378137.0;
+constexpr double kE2 = 0.0066943799901413165;
 
 // Lowers (or raises) `slot` to `value` unless it already holds a lower (higher) one.
 template <typename Better>
@@ -44,7 +47,8 @@ void ZoomSurface::include(std::size_t pixel, double offset_m) {
 
 DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
-                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface) {
+                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
+                                  std::vector<std::uint32_t>* met) {
   DrawnTileMeasure measure;
   const DemGrid& dem = globe.dem();
   for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
@@ -63,6 +67,7 @@ DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefP
         measure.finer_difference_m = std::max(measure.finer_difference_m, finer->differenceTo(pixel, offset_m));
       }
       if (surface) surface->include(pixel, offset_m);
+      if (met) met->push_back(static_cast<std::uint32_t>(pixel));
     });
   }
   return measure;
@@ -127,9 +132,20 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
         (direction > 0 ? north : south) = direction * std::numbers::pi / 2;
       }
     }
-    // Each edge's point nearest a pole: the extreme of z / |X| on A + mu (B - A) is where its
-    // derivative vanishes, a linear equation in mu (geocentric latitude); the geodetic
-    // latitude there, refined by a few golden-section steps for long edges.
+    // Latitudes: the geocentric latitude on a flat triangle not pierced by the polar axis is
+    // extreme on its edges, where the extreme of z / |X| on A + mu (B - A) is at the mu that
+    // zeroes its derivative (a linear equation); the geodetic latitude of a point is
+    // atan(tan(geocentric) * F) with F = (N + h) / (N (1 - e^2) + h), which grows with |tan|
+    // and shrinks with h and (for h above 0) with N: so the extremes over the triangle are
+    // bounded by its geocentric extremes with F at its lowest height (for the latitude away
+    // from the equator) or its highest (towards it), N at either end of its range.
+    double lowest_c = 1e300, highest_c = -1e300;  // geocentric latitude, radians
+    const auto geocentric = [](double x, double y, double z) { return std::atan2(z, std::hypot(x, y)); };
+    for (const EcefPoint* p : {&a, &b, &c}) {
+      const double lat = geocentric(p->x, p->y, p->z);
+      lowest_c = std::min(lowest_c, lat);
+      highest_c = std::max(highest_c, lat);
+    }
     const EcefPoint corner[3] = {a, b, c};
     for (int k = 0; k < 3; ++k) {
       const EcefPoint& p = corner[k];
@@ -141,23 +157,21 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
       if (denominator == 0) continue;
       const double mu = (p.z * pd - d[2] * pp) / denominator;
       if (!(mu > 0 && mu < 1)) continue;
-      const auto latitudeAt = [&](double m) { return geodeticOf(p.x + m * d[0], p.y + m * d[1], p.z + m * d[2]).lat_deg; };
-      const double sign = latitudeAt(mu) >= 0 ? 1.0 : -1.0;
-      double best = sign * latitudeAt(mu);
-      if (std::sqrt(dd) > 50e3) {
-        double lo = std::max(0.0, mu - 0.05), hi = std::min(1.0, mu + 0.05);
-        const double ratio = (std::sqrt(5.0) - 1) / 2;
-        for (int step = 0; step < 40; ++step) {
-          const double m1 = hi - ratio * (hi - lo), m2 = lo + ratio * (hi - lo);
-          if (sign * latitudeAt(m1) > sign * latitudeAt(m2)) hi = m2;
-          else lo = m1;
-        }
-        best = std::max(best, sign * latitudeAt((lo + hi) / 2));
-      }
-      const double lat_rad = sign * best * kDegToRad;
-      south = std::min(south, lat_rad);
-      north = std::max(north, lat_rad);
+      const double lat = geocentric(p.x + mu * d[0], p.y + mu * d[1], p.z + mu * d[2]);
+      lowest_c = std::min(lowest_c, lat);
+      highest_c = std::max(highest_c, lat);
     }
+    const double highest_h =
+        std::max({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
+    const double lowest_h = lowest - side_m * side_m / (6 * kRadius_m);
+    const auto factor = [](double radius, double h) { return (radius + h) / (radius * (1 - kE2) + h); };
+    const double f_low_h = std::max(factor(kA, lowest_h), factor(kA / std::sqrt(1 - kE2), lowest_h));
+    const double f_high_h = std::min(factor(kA, highest_h), factor(kA / std::sqrt(1 - kE2), highest_h));
+    const auto geodeticBound = [&](double lat_c, bool poleward) {
+      return std::atan(std::tan(lat_c) * (poleward ? f_low_h : f_high_h));
+    };
+    north = std::max(north, geodeticBound(highest_c, highest_c >= 0));
+    south = std::min(south, geodeticBound(lowest_c, lowest_c <= 0));
   }
   if (region.empty && !all_longitudes) {
     // Only pole vertices: a degenerate content; take the whole circle.

@@ -68,10 +68,12 @@ struct DrawnTileMeasure {
 
 // Measures a tile's triangles (`indices`, 3 per triangle, into `vertices`: ECEF as decoded,
 // and `grid`: their positions in the DEM's grid, at most `shift_m` from the drawn ones). Adds
-// every offset to `surface` (when not null) and compares with `finer` (when not null).
+// every offset to `surface` (when not null) and compares with `finer` (when not null); the
+// pixels met go to `met` (when not null; unsorted, with repeats).
 DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
-                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface);
+                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
+                                  std::vector<std::uint32_t>* met = nullptr);
 
 // The region holding every drawn point of the triangles (see the header comment), grown by a
 // millimetre and 1e-10 rad against rounding. A vertex at a pole (|lat| within 1e-9 deg of 90)

@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <numbers>
+#include <limits>
 #include <optional>
 #include <span>
 #include <tuple>
@@ -93,6 +94,13 @@ void validateOptions(const BuildOptions& options) {
   if (!(options.position_step_m > 0) || bits != std::round(bits) || bits > 0 || bits < -16) {
     throw Error(ErrorCode::Usage, "--position-step must be a power of two between 1/65536 and 1 m");
   }
+}
+
+// The smallest multiple of a micrometre at or above `metres` (at least one micrometre).
+double roundUpToMicrometre(double metres) {
+  double rounded = std::ceil(metres * 1e6) / 1e6;
+  while (rounded < metres) rounded = std::nextafter(rounded, std::numeric_limits<double>::infinity());
+  return std::max(rounded, 1e-6);
 }
 
 // Unit normals in ECEF of a level's vertices from the whole level mesh (area-weighted face
@@ -574,8 +582,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         node.content_uri = contentUri(tile.key, options.implicit_tiling);
         node.region = tile_out.region;
         // Measured on the decoded content: against the DEM and against the next finer zoom
-        // where both are drawn.
-        node.geometric_error_m = std::max(tile_out.measure.max_error_m, tile_out.measure.finer_difference_m);
+        // where both are drawn; rounded up to the micrometre, what another implementation of
+        // the same measure may differ by in its last bits.
+        node.geometric_error_m =
+            roundUpToMicrometre(std::max(tile_out.measure.max_error_m, tile_out.measure.finer_difference_m));
         zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile_out.measure.max_error_m);
         zoom_summary.bytes += output.writeFile(node.content_uri, tile_out.glb);
         zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile_out.position_bits);

@@ -14,6 +14,7 @@
 
 #include "src/base/error.h"
 #include "src/geo/dem_on_globe.h"
+#include "src/geo/drawn_pixels.h"
 #include "src/geo/drawn_triangle.h"
 
 #if defined(__x86_64__)
@@ -188,8 +189,8 @@ __attribute__((target("avx2"))) inline __m256d exactErrors4(const DemOnGlobe& gl
                                                             std::size_t i) {
   const __m256d px = _mm256_loadu_pd(globe.pointX() + i), py = _mm256_loadu_pd(globe.pointY() + i),
                 pz = _mm256_loadu_pd(globe.pointZ() + i);
-  const __m256d ux = _mm256_cvtps_pd(_mm_loadu_ps(globe.upX() + i)), uy = _mm256_cvtps_pd(_mm_loadu_ps(globe.upY() + i)),
-                uz = _mm256_cvtps_pd(_mm_loadu_ps(globe.upZ() + i));
+  const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
+                uz = _mm256_loadu_pd(globe.upZ() + i);
   const __m256d nx = _mm256_set1_pd(drawn.normal[0]), ny = _mm256_set1_pd(drawn.normal[1]),
                 nz = _mm256_set1_pd(drawn.normal[2]);
   const __m256d along =
@@ -199,8 +200,17 @@ __attribute__((target("avx2"))) inline __m256d exactErrors4(const DemOnGlobe& gl
   const __m256d across =
       _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, dx), _mm256_mul_pd(ny, dy)), _mm256_mul_pd(nz, dz));
   const __m256d error = _mm256_andnot_pd(_mm256_set1_pd(-0.0), _mm256_div_pd(across, along));
+  // A corner's own point: 0, as DrawnTriangle::offset has it.
+  __m256d at_corner = _mm256_setzero_pd();
+  for (int k = 0; k < 3; ++k) {
+    const EcefPoint& c = drawn.corner(k);
+    at_corner = _mm256_or_pd(
+        at_corner, _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(px, _mm256_set1_pd(c.x), _CMP_EQ_OQ),
+                                               _mm256_cmp_pd(py, _mm256_set1_pd(c.y), _CMP_EQ_OQ)),
+                                 _mm256_cmp_pd(pz, _mm256_set1_pd(c.z), _CMP_EQ_OQ)));
+  }
   // min(NaN, cap) is the cap: vminpd returns its second operand when either is NaN.
-  return _mm256_min_pd(error, _mm256_set1_pd(kWallError));
+  return _mm256_blendv_pd(_mm256_min_pd(error, _mm256_set1_pd(kWallError)), _mm256_setzero_pd(), at_corner);
 }
 
 // The largest exact error over pixels [x0, x1] of the row starting at pixel index row_start.
@@ -408,18 +418,68 @@ class GreedyInsertion {
 
     const double total = static_cast<double>(dem_.pixelCount());
     std::uint64_t reported = 0;
-    while (!heap_.empty()) {
-      const std::int32_t t = heap_.front().triangle;
-      insert(candidate_[static_cast<std::size_t>(t)], t);
-      flushPending();
-      // Progress by vertices relative to a rough budget; the stage total is the pixel count.
-      const auto done = static_cast<std::uint64_t>(std::min(total, static_cast<double>(coords_.size()) * 8));
-      if (progress && done - reported >= 4096) {
-        progress->advance(done - reported);
-        reported = done;
+    do {
+      while (!heap_.empty()) {
+        const std::int32_t t = heap_.front().triangle;
+        insertCandidate(t);
+        flushPending();
+        // Progress by vertices relative to a rough budget; the stage total is the pixel count.
+        const auto done = static_cast<std::uint64_t>(std::min(total, static_cast<double>(coords_.size()) * 8));
+        if (progress && done - reported >= 4096) {
+          progress->advance(done - reported);
+          reported = done;
+        }
+      }
+    } while (globe_ && strayCandidates());
+    if (globe_ && border_fixed_) collectBorderViolations();
+  }
+
+  // When the greedy loop is done: the triangles not looked at since they last changed are
+  // measured at the pixels outside them in the grid that they are drawn above (worstStray);
+  // one beyond the bound makes its triangle a candidate again. Returns whether any did.
+  bool strayCandidates() {
+    bool again = false;
+    const auto triangle_count = static_cast<std::int32_t>(triangles_.size() / 3);
+    for (std::int32_t t = 0; t < triangle_count; ++t) {
+      if (stray_checked_[static_cast<std::size_t>(t)]) continue;
+      stray_checked_[static_cast<std::size_t>(t)] = 1;
+      if (dropped_[static_cast<std::size_t>(t)]) continue;
+      const Pixel a = vertex(3 * t), b = vertex(3 * t + 1), c = vertex(3 * t + 2);
+      const DrawnTriangle drawn(globe_->point(pixelIndex(a)), globe_->point(pixelIndex(b)),
+                                globe_->point(pixelIndex(c)));
+      if (drawn.degenerate()) continue;
+      Pixel stray;
+      double stray_error = -1;
+      worstStray(a, b, c, drawn, &stray, &stray_error);
+      if (stray_error > max_error_) {
+        candidate_[static_cast<std::size_t>(t)] = stray;
+        error_[static_cast<std::size_t>(t)] = stray_error;
+        heapPush(t);
+        again = true;
       }
     }
-    if (globe_ && border_fixed_) collectBorderViolations();
+    return again;
+  }
+
+  // Inserts triangle t's candidate: into t, or (a pixel t is drawn above from outside,
+  // worstStray) into the triangle holding it; a pixel that is a vertex already is set aside.
+  void insertCandidate(std::int32_t t) {
+    const Pixel p = candidate_[static_cast<std::size_t>(t)];
+    const Pixel a = vertex(3 * t), b = vertex(3 * t + 1), c = vertex(3 * t + 2);
+    if (orient(a, b, p) >= 0 && orient(b, c, p) >= 0 && orient(c, a, p) >= 0) {
+      insert(p, t);
+      return;
+    }
+    const std::int32_t holder = locate(p);
+    for (int k = 0; k < 3; ++k) {
+      const Pixel v = vertex(3 * holder + k);
+      if (v.x == p.x && v.y == p.y) {
+        stray_vertices_.insert(pixelIndex(p));
+        markPending(t);
+        return;
+      }
+    }
+    insert(p, holder);
   }
 
   // Inserts a pixel of the window's outline (not a corner) into the hull triangle whose
@@ -503,6 +563,7 @@ class GreedyInsertion {
     dropped_.push_back(0);
     heap_position_.push_back(kNone);
     pending_flag_.push_back(0);
+    stray_checked_.push_back(0);
     link(3 * t, ab);
     link(3 * t + 1, bc);
     link(3 * t + 2, ca);
@@ -539,6 +600,7 @@ class GreedyInsertion {
 
   void markPending(std::int32_t t) {
     heapRemove(t);
+    stray_checked_[static_cast<std::size_t>(t)] = 0;
     if (!pending_flag_[static_cast<std::size_t>(t)]) {
       pending_flag_[static_cast<std::size_t>(t)] = 1;
       pending_.push_back(t);
@@ -1195,6 +1257,57 @@ class GreedyInsertion {
     });
   }
 
+  // The worst pixel outside triangle (a, b, c) in the grid whose vertical meets the triangle
+  // as drawn (its footprint strays from the grid triangle by its chord's bulge, strayMargin):
+  // only pixels strictly inside the window's own ground (a fixed outline's pixels and other
+  // windows' are not its to refine), off a pole row, with data, and not yet vertices (a
+  // pixel the mesh already has as a vertex cannot be inserted again: its vertical is left to
+  // the tiles' measure). A triangle's corners are lattice points, so a lattice point outside
+  // it lies at least 1 / (its longest edge) pixels off: a smaller margin strays over none.
+  void worstStray(Pixel a, Pixel b, Pixel c, const DrawnTriangle& drawn, Pixel* best, double* best_error) const {
+    const auto corner = [&](Pixel p) { return GridCorner{double(p.x), double(p.y), globe_->poleRow(p.y)}; };
+    const PixelMargin margin = strayMargin(*globe_, {corner(a), corner(b), corner(c)}, drawn.longestEdge(), 0.0);
+    const double edge[3] = {std::sqrt(static_cast<double>(squaredLength(b, c))),
+                            std::sqrt(static_cast<double>(squaredLength(c, a))),
+                            std::sqrt(static_cast<double>(squaredLength(a, b)))};
+    const double margin_px = std::max(margin.columns, margin.rows);
+    if (margin_px * std::max({edge[0], edge[1], edge[2]}) < 1) return;
+    const bool fixed = border_fixed_;
+    const std::int32_t x0 = window_.x0 + (fixed ? 1 : 0), x1 = window_.x1 - (fixed ? 1 : 0);
+    const std::int32_t y0 = window_.y0 + (fixed ? 1 : 0), y1 = window_.y1 - (fixed ? 1 : 0);
+    const auto first = [](double value) { return static_cast<std::int64_t>(std::ceil(value - 1e-9)); };
+    const auto last = [](double value) { return static_cast<std::int64_t>(std::floor(value + 1e-9)); };
+    const std::int64_t col0 = std::max<std::int64_t>(x0, first(std::min({a.x, b.x, c.x}) - margin.columns));
+    const std::int64_t col1 = std::min<std::int64_t>(x1, last(std::max({a.x, b.x, c.x}) + margin.columns));
+    const std::int64_t row0 = std::max<std::int64_t>(y0, first(std::min({a.y, b.y, c.y}) - margin.rows));
+    const std::int64_t row1 = std::min<std::int64_t>(y1, last(std::max({a.y, b.y, c.y}) + margin.rows));
+    for (std::int64_t row = row0; row <= row1; ++row) {
+      if (globe_->poleRow(static_cast<std::int32_t>(row))) continue;
+      for (std::int64_t col = col0; col <= col1; ++col) {
+        const Pixel p{static_cast<std::int32_t>(col), static_cast<std::int32_t>(row)};
+        const std::int64_t wa = orient(b, c, p), wb = orient(c, a, p), wc = orient(a, b, p);
+        if (wa >= 0 && wb >= 0 && wc >= 0) continue;  // inside: worstExact's
+        // How far outside, beyond the edge it is farthest past, in pixels.
+        const double beyond = std::min({static_cast<double>(wa) / edge[0], static_cast<double>(wb) / edge[1],
+                                        static_cast<double>(wc) / edge[2]});
+        if (beyond < -margin_px) continue;
+        const std::size_t i = pixelIndex(p);
+        if (std::isnan(dem_.heights_m[i]) || stray_vertices_.count(i)) continue;
+        double offset = 0;
+        if (!drawn.meets(globe_->point(i), globe_->up(i), &offset)) continue;
+        const double error = std::min(std::fabs(offset), kWallError);
+        if (error > *best_error) {
+          *best_error = error;
+          *best = p;
+        }
+      }
+    }
+  }
+
+  static std::int64_t squaredLength(Pixel p, Pixel q) {
+    return std::int64_t{q.x - p.x} * (q.x - p.x) + std::int64_t{q.y - p.y} * (q.y - p.y);
+  }
+
   // A fixed outline (a windowed build's shared border polylines) is chosen in 1D, before the
   // windows' triangles exist: the pixels on it that a triangle of this window, as drawn,
   // misses by more than the bound are collected for the build to add to the outline.
@@ -1299,6 +1412,8 @@ class GreedyInsertion {
   std::vector<HeapEntry> heap_;
   std::vector<std::int32_t> pending_;
   std::vector<Pixel> border_violations_;
+  std::unordered_set<std::size_t> stray_vertices_;  // pixels worstStray found as vertices
+  std::vector<std::uint8_t> stray_checked_;  // per triangle: strayCandidates looked at it as it is
   // Break lines: only used when the window has some.
   static constexpr int kMaxBends = 16;
   bool tracking_ = false;

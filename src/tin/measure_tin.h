@@ -17,6 +17,7 @@
 
 #include "src/dem/dem_grid.h"
 #include "src/geo/dem_on_globe.h"
+#include "src/geo/drawn_pixels.h"
 #include "src/geo/drawn_triangle.h"
 #include "src/tin/tin_mesh.h"
 
@@ -66,22 +67,62 @@ void forEachCoveredPixel(const DemGrid& dem, const GridPoint& a, const GridPoint
 
 // forEachCoveredPixel on the globe: the same pixels, each with the signed vertical offset of
 // the drawn triangle (corners pa, pb, pc in ECEF) from the pixel's DEM point (positive: the
-// triangle is above). A pixel on a pole row (DemOnGlobe::poleRow: all its pixels are one
-// point), and every pixel of a triangle degenerate in ECEF (two corners at a pole), is
-// measured in the grid: the linearly interpolated height minus the DEM's. A nodata pixel is
-// visited too (with an offset from its placeholder point).
+// triangle is above), then the pixels outside it in the grid whose verticals meet the drawn
+// triangle (a long chord strays from its grid triangle by its bulge, strayMargin; at high
+// latitudes by columns), each with the offset where it meets. A pixel on a pole row
+// (DemOnGlobe::poleRow: all its pixels are one point), and every pixel of a triangle
+// degenerate in ECEF (two corners at a pole), is measured in the grid: the linearly
+// interpolated height minus the DEM's. A nodata pixel is visited too (with an offset from its
+// placeholder point). visit returns false to stop.
 template <typename Visit>
 void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                                 const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, Visit&& visit) {
-  const DrawnTriangle drawn(pa, pb, pc);
   const DemGrid& dem = globe.dem();
+  const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+  if (area2 == 0) return;
+  const DrawnTriangle drawn(pa, pb, pc);
   const bool degenerate = drawn.degenerate();
-  forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double surface_m) {
-    if (degenerate || globe.poleRow(static_cast<std::int32_t>(pixel / static_cast<std::size_t>(dem.width)))) {
-      return visit(pixel, surface_m - static_cast<double>(dem.heights_m[pixel]));
+  const auto onPoleRow = [&](const GridPoint& p) {
+    const double row = std::round(p.row);
+    return p.row == row && row >= 0 && row < dem.height && globe.poleRow(static_cast<std::int32_t>(row));
+  };
+  PixelMargin margin;
+  if (!degenerate) {
+    margin = strayMargin(globe, {GridCorner{a.col, a.row, onPoleRow(a)}, GridCorner{b.col, b.row, onPoleRow(b)},
+                                 GridCorner{c.col, c.row, onPoleRow(c)}},
+                         drawn.longestEdge(), 0.0);
+  }
+  const double margin_px = std::max(margin.columns, margin.rows);
+  const double eps = 1e-9 * std::fabs(area2);
+  const double edge_length[3] = {std::hypot(c.col - b.col, c.row - b.row), std::hypot(a.col - c.col, a.row - c.row),
+                                 std::hypot(b.col - a.col, b.row - a.row)};  // opposite a, b, c
+  const int min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.columns - 1e-9)));
+  const int max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.columns + 1e-9)));
+  const int min_row = static_cast<int>(std::max(0.0, std::ceil(std::min({a.row, b.row, c.row}) - margin.rows - 1e-9)));
+  const int max_row = static_cast<int>(std::min(dem.height - 1.0, std::floor(std::max({a.row, b.row, c.row}) + margin.rows + 1e-9)));
+  for (int row = min_row; row <= max_row; ++row) {
+    const bool pole_row = globe.poleRow(row);
+    for (int col = min_col; col <= max_col; ++col) {
+      const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
+      const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
+      const double wc = 1.0 - wa - wb;
+      const std::size_t pixel = dem.index(col, row);
+      if (wa * std::fabs(area2) >= -eps && wb * std::fabs(area2) >= -eps && wc * std::fabs(area2) >= -eps) {
+        const double offset_m = degenerate || pole_row
+                                    ? wa * a.height_m + wb * b.height_m + wc * c.height_m - dem.heights_m[pixel]
+                                    : drawn.offset(globe.point(pixel), globe.up(pixel));
+        if (!visit(pixel, offset_m)) return;
+        continue;
+      }
+      if (degenerate || pole_row) continue;
+      // Outside in the grid: within the margin of every edge, and met as drawn?
+      const double distance = std::min({wa * std::fabs(area2) / edge_length[0], wb * std::fabs(area2) / edge_length[1],
+                                        wc * std::fabs(area2) / edge_length[2]});
+      if (distance < -margin_px) continue;
+      double offset_m = 0;
+      if (drawn.meets(globe.point(pixel), globe.up(pixel), &offset_m) && !visit(pixel, offset_m)) return;
     }
-    return visit(pixel, drawn.offset(globe.point(pixel), globe.up(pixel)));
-  });
+  }
 }
 
 }  // namespace terratiles

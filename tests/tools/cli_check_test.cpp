@@ -10,9 +10,12 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "formats/gltf/read_glb.h"
+#include "formats/gltf/write_glb.h"
 #include "src/pipeline/check_output.h"
 #include "tests/test_support.h"
 #include "tileset/implicit_tileset.h"
@@ -60,6 +63,25 @@ void checkSeamless(const CheckReport& report) {
   CHECK(report.ok());
 }
 
+nlohmann::json readJsonFile(const std::string& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
+
+// Every tile with content of a tileset.json tree, depth first.
+void forEachContent(nlohmann::json& node, const std::function<void(nlohmann::json&)>& visit) {
+  if (node.contains("content")) visit(node);
+  if (node.contains("children")) {
+    for (nlohmann::json& child : node["children"]) forEachContent(child, visit);
+  }
+}
+
+// A decoded GLB's vertex v in ECEF, as doubles (glTF y-up back to z-up).
+std::array<double, 3> ecefOf(const GlbMesh& mesh, std::size_t v) {
+  return {mesh.translation[0] + mesh.positions[3 * v], -(mesh.translation[2] + mesh.positions[3 * v + 2]),
+          mesh.translation[1] + mesh.positions[3 * v + 1]};
+}
+
 }  // namespace
 
 TEST_SUITE("check") {
@@ -92,6 +114,118 @@ TEST_SUITE("check") {
     const auto not_an_output = test::runTerratiles({"check", dir.path().string()});
     CHECK(not_an_output.exit_code == 3);
     CHECK(not_an_output.err.find("tileset.json cannot be read") != std::string::npos);
+  }
+
+  TEST_CASE("the check fails on geometric errors measured before quantisation") {
+    // The same raster twice: the levels and tiles are the same, only the position grid
+    // differs (7.8 mm, the default, and 0.5 m). The fine build's errors are the coarse
+    // build's errors before (most of) its quantisation: written into the coarse tileset,
+    // the check must find decoded contents beyond them.
+    test::TempDir dir;
+    const CheckReport fine =
+        buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--no-report"}, dir, "fine");
+    checkSeamless(fine);
+    const CheckReport coarse =
+        buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--no-report", "--position-step", "0.5"}, dir, "coarse");
+    checkSeamless(coarse);
+    std::map<std::string, double> fine_errors;
+    nlohmann::json fine_tileset = readJsonFile(dir / "fine/tileset.json");
+    forEachContent(fine_tileset["root"], [&](nlohmann::json& tile) {
+      fine_errors[tile["content"]["uri"].get<std::string>()] = tile["geometricError"].get<double>();
+    });
+    nlohmann::json tileset = readJsonFile(dir / "coarse/tileset.json");
+    std::size_t replaced = 0;
+    forEachContent(tileset["root"], [&](nlohmann::json& tile) {
+      const std::string uri = tile["content"]["uri"];
+      REQUIRE(fine_errors.count(uri) == 1);
+      tile["geometricError"] = fine_errors[uri];
+      ++replaced;
+    });
+    CHECK(replaced == fine_errors.size());
+    std::ofstream(dir / "coarse/tileset.json") << tileset.dump(1);
+    Progress quiet(ProgressMode::Quiet);
+    CheckOptions options;
+    options.cuts = 20;
+    const CheckReport mutated = checkOutput(dir / "coarse", options, quiet);
+    MESSAGE(describeCheck(mutated));
+    CHECK(mutated.dishonest_errors > 0);
+    CHECK(mutated.worst_error_ratio > 1);
+    CHECK_FALSE(mutated.ok());
+  }
+
+  TEST_CASE("the check fails on one shared vertex left off the grid of the coarser zoom") {
+    // SRTM N57E011 in the geographic scheme: its coarse zooms use coarser grids (tiles over
+    // 65 km), and the vertices they share with finer zooms are snapped to those grids in
+    // both. One such vertex moved back by a step of its own zoom's grid must be found.
+    test::TempDir dir;
+    const CheckReport built =
+        buildAndCheck("srtm3_N57E011_4326.tif",
+                      {"--scheme", "geographic", "--tin-max-error", "5", "--tile-triangles", "2048", "--no-report"}, dir,
+                      "srtm");
+    checkSeamless(built);
+    const nlohmann::json facts = readJsonFile(dir / "srtm/build.json");
+    const nlohmann::json& steps = facts["position_step_m_by_zoom"];
+    // A zoom on a finer grid than the zoom above it.
+    std::int32_t fine_zoom = -1;
+    for (const auto& [zoom, step] : steps.items()) {
+      const std::string coarser = std::to_string(std::stoi(zoom) - 1);
+      if (steps.contains(coarser) && steps[coarser].get<double>() > step.get<double>()) fine_zoom = std::stoi(zoom);
+    }
+    REQUIRE(fine_zoom >= 0);
+    const double fine_step = steps[std::to_string(fine_zoom)].get<double>();
+    // A vertex a tile of that zoom shares with a tile of the coarser one.
+    nlohmann::json tileset = readJsonFile(dir / "srtm/tileset.json");
+    std::vector<std::string> fine_uris, coarse_uris;
+    forEachContent(tileset["root"], [&](nlohmann::json& tile) {
+      const std::string uri = tile["content"]["uri"];
+      TileKey key;
+      REQUIRE(tileKeyFromContentUri(uri, key));
+      if (key.zoom == fine_zoom) fine_uris.push_back(uri);
+      if (key.zoom == fine_zoom - 1) coarse_uris.push_back(uri);
+    });
+    std::map<std::array<double, 3>, int> coarse_points;
+    for (const std::string& uri : coarse_uris) {
+      const GlbMesh mesh = readGlbFile(dir / ("srtm/" + uri)).mesh;
+      for (std::size_t v = 0; v < mesh.vertexCount(); ++v) coarse_points[ecefOf(mesh, v)] = 1;
+    }
+    // The first such point, moved in every tile of the fine zoom that holds it (as if that
+    // zoom had snapped it to its own grid): only the pairs with the coarser zoom see it.
+    std::optional<std::array<double, 3>> point;
+    for (const std::string& uri : fine_uris) {
+      const GlbMesh mesh = readGlbFile(dir / ("srtm/" + uri)).mesh;
+      for (std::size_t v = 0; v < mesh.vertexCount() && !point; ++v) {
+        if (coarse_points.count(ecefOf(mesh, v))) point = ecefOf(mesh, v);
+      }
+      if (point) break;
+    }
+    REQUIRE(point);
+    std::size_t moved = 0;
+    for (const std::string& uri : fine_uris) {
+      GlbMesh mesh = readGlbFile(dir / ("srtm/" + uri)).mesh;
+      bool changed = false;
+      for (std::size_t v = 0; v < mesh.vertexCount(); ++v) {
+        if (ecefOf(mesh, v) != *point) continue;
+        mesh.positions[3 * v] += static_cast<float>(fine_step);  // off the coarser grid, on its own
+        changed = true;
+      }
+      if (!changed) continue;
+      ++moved;
+      GlbOptions glb;
+      glb.position_step_m = fine_step;
+      const EncodedGlb encoded = encodeGlb(mesh, glb);
+      std::ofstream(dir / ("srtm/" + uri), std::ios::binary)
+          .write(reinterpret_cast<const char*>(encoded.bytes.data()), static_cast<std::streamsize>(encoded.bytes.size()));
+    }
+    MESSAGE("moved one vertex in " << moved << " tiles of zoom " << fine_zoom);
+    REQUIRE(moved > 0);
+    Progress quiet(ProgressMode::Quiet);
+    CheckOptions options;
+    options.cuts = 20;
+    const CheckReport mutated = checkOutput(dir / "srtm", options, quiet);
+    MESSAGE(describeCheck(mutated));
+    CHECK(mutated.shared_vertex_gaps >= 1);
+    CHECK(mutated.worst_shared_vertex_gap_m > 0);
+    CHECK_FALSE(mutated.ok());
   }
 }
 
