@@ -1,5 +1,6 @@
 #include "tests/test_support.h"
 
+#include <doctest/doctest.h>
 #include <gdal_priv.h>
 #include <ogr_spatialref.h>
 #include <stdlib.h>
@@ -136,6 +137,29 @@ GltfValidation validateGltfTree(const std::string& dir) {
   }
   if (status != 0 && result.errors == 0) result.ran = false;
   return result;
+}
+
+void checkSeamless(const CheckReport& report) {
+  CHECK(report.zooms >= 2);
+  CHECK(report.cuts >= 300);
+  CHECK(report.cuts_with_holes == 0);
+  CHECK(report.left_out_pixels == 0);
+  CHECK(report.neighbour_pairs > 0);
+  CHECK(report.missing_border_vertices == 0);
+  // Outline vertices touching tiles share decode to exactly one position, whatever grid
+  // each zoom uses.
+  CHECK(report.shared_border_vertices > 0);
+  CHECK(report.shared_vertex_gaps == 0);
+  CHECK(report.worst_shared_vertex_gap_m == 0);
+  CHECK(report.measured_pixels > 0);
+  CHECK(report.overlap_pixels > 0);
+  CHECK(report.overlap_disagreements == 0);
+  CHECK(report.dishonest_errors == 0);
+  CHECK(report.worst_error_ratio <= 1);
+  CHECK(report.error_order_violations == 0);
+  CHECK(report.region_violations == 0);
+  CHECK(report.content_region_violations == 0);
+  CHECK(report.ok());
 }
 
 }  // namespace terratiles::test

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "src/dem/dem_grid.h"
+#include "src/pipeline/check_output.h"
 #include "src/tin/measure_tin.h"
 
 namespace terratiles::test {
@@ -46,6 +47,11 @@ void writeGeoTiff(const DemGrid& dem, const std::string& path, bool with_crs = t
 // measureTin of `mesh` as the build measures it: on the globe of `dem` (DemOnGlobe), heights
 // orthometric above EGM96 unless `geoid_path` names another geoid grid.
 TinErrorStatistics measureOnGlobe(const DemGrid& dem, const TinMesh& mesh, const std::string& geoid_path = "");
+
+// The doctest checks of a seamless, honest output (`terratiles check`, no tolerance): at least
+// two zooms and 300 cuts, no hole, nothing left out, every shared vertex exactly one
+// position, no error above its geometricError, regions holding their content.
+void checkSeamless(const CheckReport& report);
 
 struct CliResult {
   int exit_code = -1;

@@ -15,6 +15,7 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <iomanip>
 #include <sstream>
 
 #include "formats/dem/read_dem.h"
@@ -637,6 +638,8 @@ std::string describeCheck(const CheckReport& r) {
   text << "  shared:   " << r.shared_border_vertices << " outline vertices two touching tiles share (same zoom or "
        << "one apart), " << r.shared_vertex_gaps << " decoding apart (worst " << r.worst_shared_vertex_gap_m * 1000
        << " mm)\n";
+  // Ratios to nine digits: with no tolerance, 0.9999999 and 1.0000001 must read apart.
+  text << std::setprecision(9);
   text << "  errors:   " << r.measured_pixels << " pixel verticals meeting a decoded triangle; " << r.dishonest_errors
        << " tiles whose decoded error exceeds their geometricError (worst " << r.worst_error_ratio << " of it)\n";
   text << "  overlap:  " << r.overlap_pixels << " of them also drawn at the finer zoom, " << r.overlap_disagreements

@@ -39,30 +39,6 @@ CheckReport buildAndCheck(const std::string& raster, const std::vector<std::stri
   return report;
 }
 
-// The check has no tolerance: these are exact.
-void checkSeamless(const CheckReport& report) {
-  CHECK(report.zooms >= 2);
-  CHECK(report.cuts >= 300);
-  CHECK(report.cuts_with_holes == 0);
-  CHECK(report.left_out_pixels == 0);
-  CHECK(report.neighbour_pairs > 0);
-  CHECK(report.missing_border_vertices == 0);
-  // Outline vertices touching tiles share decode to exactly one position, whatever grid
-  // each zoom uses.
-  CHECK(report.shared_border_vertices > 0);
-  CHECK(report.shared_vertex_gaps == 0);
-  CHECK(report.worst_shared_vertex_gap_m == 0);
-  CHECK(report.measured_pixels > 0);
-  CHECK(report.overlap_pixels > 0);
-  CHECK(report.overlap_disagreements == 0);
-  CHECK(report.dishonest_errors == 0);
-  CHECK(report.worst_error_ratio <= 1);
-  CHECK(report.error_order_violations == 0);
-  CHECK(report.region_violations == 0);
-  CHECK(report.content_region_violations == 0);
-  CHECK(report.ok());
-}
-
 nlohmann::json readJsonFile(const std::string& path) {
   std::ifstream in(path);
   return nlohmann::json::parse(in);
@@ -87,18 +63,18 @@ std::array<double, 3> ecefOf(const GlbMesh& mesh, std::size_t v) {
 TEST_SUITE("check") {
   TEST_CASE("merge tiles of four real rasters in the three schemes pass the check") {
     test::TempDir dir;
-    checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {}, dir, "interlaken_webmercator"));
-    checkSeamless(buildAndCheck("srtm3_N57E011_4326.tif", {"--scheme", "geographic", "--tin-max-error", "5"}, dir,
+    test::checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {}, dir, "interlaken_webmercator"));
+    test::checkSeamless(buildAndCheck("srtm3_N57E011_4326.tif", {"--scheme", "geographic", "--tin-max-error", "5"}, dir,
                                 "srtm_geographic"));
-    checkSeamless(buildAndCheck("ca_on_lidar_dtm_1m_26917.tif", {"--scheme", "local", "--tin-max-error", "0.1", "--tile-triangles", "4096"}, dir,
+    test::checkSeamless(buildAndCheck("ca_on_lidar_dtm_1m_26917.tif", {"--scheme", "local", "--tin-max-error", "0.1", "--tile-triangles", "4096"}, dir,
                                 "ontario_local"));
-    checkSeamless(buildAndCheck("us_mn_lidar_dtm_1m_26915.tif", {"--tin-max-error", "0.1", "--tile-triangles", "4096"},
+    test::checkSeamless(buildAndCheck("us_mn_lidar_dtm_1m_26915.tif", {"--tin-max-error", "0.1", "--tile-triangles", "4096"},
                                 dir, "minnesota_webmercator"));
   }
 
   TEST_CASE("duplicate passes the check, centroid leaves holes, the grid pyramid has T-junctions") {
     test::TempDir dir;
-    checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--assign", "duplicate"}, dir, "duplicate"));
+    test::checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--assign", "duplicate"}, dir, "duplicate"));
     const CheckReport centroid = buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--assign", "centroid"}, dir, "centroid");
     CHECK(centroid.cuts_with_holes > 0);
     CHECK_FALSE(centroid.ok());
@@ -124,10 +100,10 @@ TEST_SUITE("check") {
     test::TempDir dir;
     const CheckReport fine =
         buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--no-report"}, dir, "fine");
-    checkSeamless(fine);
+    test::checkSeamless(fine);
     const CheckReport coarse =
         buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {"--no-report", "--position-step", "0.5"}, dir, "coarse");
-    checkSeamless(coarse);
+    test::checkSeamless(coarse);
     std::map<std::string, double> fine_errors;
     nlohmann::json fine_tileset = readJsonFile(dir / "fine/tileset.json");
     forEachContent(fine_tileset["root"], [&](nlohmann::json& tile) {
@@ -162,7 +138,7 @@ TEST_SUITE("check") {
         buildAndCheck("srtm3_N57E011_4326.tif",
                       {"--scheme", "geographic", "--tin-max-error", "5", "--tile-triangles", "2048", "--no-report"}, dir,
                       "srtm");
-    checkSeamless(built);
+    test::checkSeamless(built);
     const nlohmann::json facts = readJsonFile(dir / "srtm/build.json");
     const nlohmann::json& steps = facts["position_step_m_by_zoom"];
     // A zoom on a finer grid than the zoom above it.
