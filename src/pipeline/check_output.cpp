@@ -37,9 +37,14 @@ using nlohmann::json;
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr std::size_t kMaxProblems = 12;
-// A decoded outline vertex is put back on its pixel centre when it decodes within this many
-// pixels of it (quantisation moves it by far less: a step is millimetres).
+// A decoded outline vertex is put back on its pixel centre when it decodes as near it as
+// quantisation can move a DEM point (the widest step's half diagonal, plus 1 cm for the
+// round trip through PROJ), and never from farther than this many pixels. A vertex a level
+// moved (a simplifier's placement) may lie a hundredth of a pixel from a pixel centre, tens
+// of metres on a coarse DEM: put back, it would seem to sit on a straight line of lattice
+// points it is not on.
 constexpr double kLatticeTolerance_px = 0.1;
+constexpr double kRoundTripTolerance_m = 0.01;
 constexpr double kPoleDeg = 90 - 1e-9;
 
 struct CheckTile {
@@ -60,7 +65,7 @@ struct CheckTile {
   std::vector<std::array<double, 3>> vertex_ecef;
   std::vector<std::array<std::uint32_t, 2>> boundary_edges;
   std::vector<std::uint32_t> boundary_vertices;
-  std::size_t off_lattice = 0;  // outline vertices farther than kLatticeTolerance_px from a pixel centre
+  std::size_t off_lattice = 0;  // outline vertices off their pixel centre by more than quantisation explains
   std::size_t pole_vertices = 0;
 };
 
@@ -131,7 +136,7 @@ class ToDemCrs {
 // Decodes a tile and measures it (see the header): its coverage, its drawn error against the
 // DEM and against the finer zoom's surface (adding its own to `surface`), its outline.
 void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* geoid, ToDemCrs& to_dem,
-                      const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile) {
+                      double widest_step_m, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile) {
   const DemGrid& dem = globe.dem();
   const DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
   const GlbMesh& mesh = decoded.mesh;
@@ -207,7 +212,11 @@ void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
   for (const std::uint32_t v : tile.boundary_vertices) {
     if (at_pole[v]) continue;
     const double col = std::round(grid[v].col), row = std::round(grid[v].row);
-    if (std::fabs(grid[v].col - col) > kLatticeTolerance_px || std::fabs(grid[v].row - row) > kLatticeTolerance_px) {
+    const auto spacing_row = static_cast<std::int32_t>(std::clamp(row, 0.0, dem.height - 1.0));
+    const double tolerance_m = 0.5 * std::sqrt(3.0) * widest_step_m + kRoundTripTolerance_m;
+    const double column_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.columnSpacing(spacing_row));
+    const double row_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.rowSpacing(spacing_row));
+    if (std::fabs(grid[v].col - col) > column_tolerance_px || std::fabs(grid[v].row - row) > row_tolerance_px) {
       ++tile.off_lattice;
       continue;
     }
@@ -397,6 +406,9 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   progress.endStage();
   const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
   ToDemCrs to_dem(dem);
+  // The widest quantisation step any zoom used (an output without one: the lattice tolerance
+  // alone bounds where a vertex is put back on its pixel centre).
+  const double widest_step_m = build.value("position_step_m", 1e9);
   const auto problem = [&](const std::string& text) {
     if (report.problems.size() < kMaxProblems) report.problems.push_back(text);
   };
@@ -421,8 +433,8 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     }
     ZoomSurface surface(dem.pixelCount());
     tbb::parallel_for(std::size_t{0}, at_zoom.size(), [&](std::size_t k) {
-      checkTileContent(dir, globe, geoid ? &*geoid : nullptr, to_dem, finer.empty() ? nullptr : &finer, surface,
-                       tiles[at_zoom[k]]);
+      checkTileContent(dir, globe, geoid ? &*geoid : nullptr, to_dem, widest_step_m, finer.empty() ? nullptr : &finer,
+                       surface, tiles[at_zoom[k]]);
     });
     finer = std::move(surface);
     progress.advance(at_zoom.size());

@@ -6,7 +6,8 @@
 //
 // Every decoded vertex goes back from ECEF to the DEM's grid (WGS84 -> the DEM's CRS through
 // PROJ, the geoid undulation taken off for orthometric heights). A vertex on a tile's outline
-// that decodes within a tenth of a pixel of a pixel centre is a DEM point (the finest TIN's
+// that decodes as near a pixel centre as quantisation can move a DEM point (half the widest
+// step's diagonal plus 1 cm, at most a tenth of a pixel) is a DEM point (the finest TIN's
 // vertices, and the data's outer border at every zoom, never move): it is put back on that
 // centre, so outlines meet exactly in the grid. (An outline vertex a coarser level moved
 // before it was locked is not one; counted.) A vertex at a pole (a geographic DEM's first or
