@@ -11,11 +11,11 @@
 #include <filesystem>
 #include <map>
 #include <fstream>
+#include <iomanip>
 #include <memory>
 #include <numbers>
 #include <optional>
 #include <random>
-#include <iomanip>
 #include <sstream>
 
 #include "formats/dem/read_dem.h"
@@ -209,11 +209,11 @@ void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
                                tile.boundary_vertices.end());
   std::vector<GridPoint> lattice(n);
   for (std::size_t v = 0; v < n; ++v) lattice[v] = {grid[v].col, grid[v].row, 0};
+  const double tolerance_m = 0.5 * std::sqrt(3.0) * widest_step_m + kRoundTripTolerance_m;
   for (const std::uint32_t v : tile.boundary_vertices) {
     if (at_pole[v]) continue;
     const double col = std::round(grid[v].col), row = std::round(grid[v].row);
     const auto spacing_row = static_cast<std::int32_t>(std::clamp(row, 0.0, dem.height - 1.0));
-    const double tolerance_m = 0.5 * std::sqrt(3.0) * widest_step_m + kRoundTripTolerance_m;
     const double column_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.columnSpacing(spacing_row));
     const double row_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.rowSpacing(spacing_row));
     if (std::fabs(grid[v].col - col) > column_tolerance_px || std::fabs(grid[v].row - row) > row_tolerance_px) {

@@ -11,9 +11,6 @@ namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kPoleDeg = 90 - 1e-9;
-// WGS84: semi-major axis and first eccentricity squared.
-constexpr double kA = 6378137.0;
-constexpr double kE2 = 0.0066943799901413165;
 
 // Lowers (or raises) `slot` to `value` unless it already holds a lower (higher) one.
 template <typename Better>
@@ -164,9 +161,13 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     const double highest_h =
         std::max({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
     const double lowest_h = lowest - side_m * side_m / (6 * kRadius_m);
-    const auto factor = [](double radius, double h) { return (radius + h) / (radius * (1 - kE2) + h); };
-    const double f_low_h = std::max(factor(kA, lowest_h), factor(kA / std::sqrt(1 - kE2), lowest_h));
-    const double f_high_h = std::min(factor(kA, highest_h), factor(kA / std::sqrt(1 - kE2), highest_h));
+    // N runs from a (equator) to a / sqrt(1 - e^2) (poles).
+    const auto& earth = GeographicLib::Geocentric::WGS84();
+    const double semi_major = earth.EquatorialRadius(), e2 = earth.Flattening() * (2 - earth.Flattening());
+    const auto factor = [e2](double radius, double h) { return (radius + h) / (radius * (1 - e2) + h); };
+    const double polar_n = semi_major / std::sqrt(1 - e2);
+    const double f_low_h = std::max(factor(semi_major, lowest_h), factor(polar_n, lowest_h));
+    const double f_high_h = std::min(factor(semi_major, highest_h), factor(polar_n, highest_h));
     const auto geodeticBound = [&](double lat_c, bool poleward) {
       return std::atan(std::tan(lat_c) * (poleward ? f_low_h : f_high_h));
     };
