@@ -142,6 +142,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     progress.beginStage("level " + std::to_string(l + 1) + ": simplifying " +
                             std::to_string(level.partition.cluster_count) + " clusters", 0);
     SimplifyOptions simplify;
+    simplify.simplifier = options.simplifier;
     simplify.edge_ratio = options.level_ratio;
     simplify.metres_per_col = metres[0];
     simplify.metres_per_row = metres[1];

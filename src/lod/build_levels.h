@@ -4,7 +4,7 @@
 // Level 0 is the finest TIN. Each coarser level is made from the one before it: partition
 // its triangles into clusters (METIS on the face dual graph, or random growth for
 // experiments), lock every cluster border, the outer border and the feature constraints,
-// simplify inside every cluster (CGAL edge collapse, in parallel) to about `level_ratio` of
+// simplify inside every cluster (edge collapse, in parallel: LevelOptions::simplifier) to about `level_ratio` of
 // its edges or until the next collapse would exceed the level's error budget, and merge the
 // clusters by index. Re-partitioning every level moves the locked borders, so no border
 // stays locked for ever (paper figs 4, 42, 43); `repartition = false` keeps the first
@@ -23,6 +23,7 @@
 #include "src/base/progress.h"
 #include "src/dem/dem_grid.h"
 #include "src/partition/partition_faces.h"
+#include "src/simplify/simplify_clusters.h"
 #include "src/tin/measure_tin.h"
 #include "src/tin/tin_mesh.h"
 
@@ -35,6 +36,9 @@ struct LevelOptions {
   std::int32_t cluster_triangles = 2048;
   // When not empty, clusters_per_level[l] clusters split level l (instead of the above).
   std::vector<std::int32_t> clusters_per_level;
+  // The edge-collapse engine: CGAL's edge collapse (the default, the quality reference) or
+  // native (terratiles' own over flat arrays, faster; simplify_clusters.h).
+  Simplifier simplifier = Simplifier::Cgal;
   // Target edge ratio of one simplification (paper: 0.5).
   double level_ratio = 0.5;
   // Error budget of level l (l >= 1): first_budget_m * level_error_growth^(l - 1); 0 or

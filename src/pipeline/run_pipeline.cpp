@@ -420,6 +420,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     level_options.globe = &globe;
     level_options.clusters_per_level = plan.clusters_per_level;
     level_options.level_ratio = options.level_ratio;
+    level_options.simplifier = options.simplifier;
     if (options.level_error_growth > 0) {
       level_options.level_error_growth = options.level_error_growth;
       level_options.first_budget_m = options.tin_max_error_m * options.level_error_growth;

@@ -43,6 +43,7 @@ struct BuildOptions {
   // a tile outline follows stay locked (paper fig 34).
   bool join_tile_clusters = true;
   double level_ratio = 0.5;            // clusters: edges kept per simplification
+  Simplifier simplifier = Simplifier::Cgal;  // clusters: the edge-collapse engine
   double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)
   std::string constraints;             // clusters: break lines (OGR file), or empty
   std::int32_t tile_cells = 128;       // grid: cells per tile side

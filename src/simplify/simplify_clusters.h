@@ -3,17 +3,40 @@
 // sections 3.3-3.4): edge collapse inside every cluster of a partitioned TIN, with every
 // cluster border, the dataset's outer border and the feature constraints locked.
 //
-// Each cluster's triangles become one CGAL::Surface_mesh (Simple_cartesian<double>, points
-// (col * metres_per_col, -row * metres_per_row, height_m): metres in x east, y north and z, so
-// the mesh is counter-clockwise seen from above like TinMesh). CGAL's
-// Surface_mesh_simplification::edge_collapse simplifies it with Garland-Heckbert plane
-// quadrics, an edge_is_constrained_map holding every border edge of the cluster's submesh and
-// every constrained edge, and Constrained_placement, so a vertex on a locked edge never moves
-// and a chord between two locked vertices is never collapsed (CGAL refuses an edge whose two
-// ends both touch a constrained edge). A cluster stops when its edge count falls below
-// options.edge_ratio of its initial count (CGAL 5.5 Count_ratio_stop_predicate, called
-// Edge_count_ratio_stop_predicate from CGAL 5.6), or when no collapse is left that the filter
-// accepts. The filter refuses a collapse when
+// Two engines do the collapses (SimplifyOptions::simplifier); both keep the rules below.
+//
+// Simplifier::Native (`--simplifier native`, 4-6x faster than CGAL; not yet the default: its
+// levels' geometricError runs up to 23 % above CGAL's on SRTM Gabon, issue 15): terratiles'
+// own edge collapse over flat arrays. A vertex
+// is free when none of its edges is locked (a locked edge is on the dataset's outer border,
+// between two clusters or a constraint), so a free vertex's star is closed and inside its
+// cluster. A collapse removes a free vertex u into a neighbour v: when v is locked, u goes to v
+// (a half-edge collapse, v stays where it is); when v is free too, either that, or v moves to
+// the edge's quadric optimum (the 3x3 solve of CGAL's placement below, when well
+// conditioned). The two triangles of edge uv vanish. Costs: Garland-Heckbert plane quadrics
+// in metres (unit face normals, as CGAL's), (Q_u + Q_v) at the new position. The cluster works
+// in passes: each pass ranks the free vertices by their cheapest collapse (ties by vertex
+// order), then takes them in that order, trying each vertex's collapses from the cheapest and
+// applying the first the filter accepts, while no vertex takes part in two collapses of one
+// pass; as in meshoptimizer, a pass stops at 1.5 times the cost of the last collapse the edge
+// target needs, and the next pass re-ranks. A vertex the filter refused every way is tried
+// again only when a collapse changes its star. It never allocates per collapse: each thread
+// keeps one set of arrays for all its clusters.
+//
+// Simplifier::Cgal (the default and the quality reference): each cluster's triangles
+// become one CGAL::Surface_mesh (Simple_cartesian<double>, points (col * metres_per_col,
+// -row * metres_per_row, height_m): metres in x east, y north and z, so the mesh is
+// counter-clockwise seen from above like TinMesh). CGAL's Surface_mesh_simplification::
+// edge_collapse simplifies it with Garland-Heckbert plane quadrics, an
+// edge_is_constrained_map holding every border edge of the cluster's submesh and every
+// constrained edge, and Constrained_placement, so a vertex on a locked edge never moves and a
+// chord between two locked vertices is never collapsed (CGAL refuses an edge whose two ends
+// both touch a constrained edge); its placement may move a vertex off the lattice.
+//
+// Both: a cluster stops when its edge count falls below options.edge_ratio of its initial
+// count (for CGAL: CGAL 5.5 Count_ratio_stop_predicate, called Edge_count_ratio_stop_predicate
+// from CGAL 5.6), or when no collapse is left that the filter accepts. The filter refuses a
+// collapse when
 //   (a) one of the triangles it creates would be clockwise, or degenerate (twice its area
 //       below 1e-9 times its longest edge squared), in the (col, row) plane: the level stays
 //       a height field without fold-overs, and covers exactly the same ground; or steeper
@@ -29,13 +52,14 @@
 // So with a finite budget, every triangle the simplification creates is within the budget
 // of the DEM (triangles it does not touch keep the error they had).
 //
-// The quadrics are Garland and Heckbert's plane quadrics exactly as CGAL's
+// CGAL engine: the quadrics are Garland and Heckbert's plane quadrics exactly as CGAL's
 // GarlandHeckbert_plane_policies builds them (unit face normals; border edges add a
 // perpendicular plane weighted 100), written here on 4x4 doubles because CGAL's class needs
 // Eigen. The placement is the quadric optimum when it is well conditioned and lies inside the
 // star of the edge seen from above, otherwise the best point of the edge segment that does.
 //
-// Vertices: a collapse keeps one of its two input vertices (CGAL chooses which; when the new
+// Vertices: a collapse keeps one of its two input vertices (the native engine: v; CGAL
+// chooses which; when the new
 // point is one end's point, that end's vertex survives). The output holds the surviving input
 // vertices in input order, each with its input GridPoint bit for bit unless a collapse moved
 // it (then (x / metres_per_col, -y / metres_per_row, z)). A vertex on a locked edge, and so
@@ -46,14 +70,15 @@
 // slot, and assembled by vertex index; there is no welding tolerance).
 //
 // Input: an edge-manifold, consistently oriented TinMesh (vertex-manifold is not needed: a
-// vertex where two fans of one cluster touch is split inside that cluster's submesh, and is
-// locked there). Throws Error(ErrorCode::Input) with a one-line message when a triangle uses a
+// vertex where two fans of one cluster touch is on that cluster's border, so locked; CGAL
+// splits it inside the cluster's submesh). Throws Error(ErrorCode::Input) with a one-line message when a triangle uses a
 // vertex index out of range or the same vertex twice, an edge is in more than two triangles,
 // two triangles run an edge in the same direction, cluster_of_face does not hold one id in
 // [0, cluster_count) per triangle, or a constrained edge is not an edge of the mesh; throws
 // Error(ErrorCode::Usage) for options out of range. Memory: O(triangles) for the topology plus
-// one cluster's Surface_mesh per thread. Time: O(F log F) plus the collapses, which are
-// O(E log E) per cluster and, with a finite budget, O(pixels under the star) per collapse.
+// one cluster's arrays (native) or Surface_mesh (CGAL) per thread. Time: O(F log F) plus the
+// collapses: per cluster O(E log E) (native: per pass), and with a finite budget
+// O(pixels under the star) per collapse tried.
 
 #include <array>
 #include <cstddef>
@@ -70,7 +95,13 @@ namespace terratiles {
 
 class DemOnGlobe;
 
+enum class Simplifier {
+  Native,  // terratiles' own edge collapse over flat arrays (fast)
+  Cgal,    // CGAL's Surface_mesh_simplification::edge_collapse per cluster (the default, the reference)
+};
+
 struct SimplifyOptions {
+  Simplifier simplifier = Simplifier::Cgal;
   // Each cluster stops when its edge count falls below this fraction of its initial count
   // (paper 3.4: 50 %). In (0, 1]; 1 leaves the mesh as it is.
   double edge_ratio = 0.5;

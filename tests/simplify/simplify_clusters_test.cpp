@@ -58,8 +58,14 @@ const RealLevel& gothenburg() {
   return level;
 }
 
-SimplifyOptions optionsFor(const RealLevel& level, double max_error_m) {
+// Both engines keep every invariant below: the default and the quality reference.
+constexpr Simplifier kEngines[] = {Simplifier::Native, Simplifier::Cgal};
+
+const char* engineName(Simplifier engine) { return engine == Simplifier::Cgal ? "cgal" : "native"; }
+
+SimplifyOptions optionsFor(Simplifier engine, const RealLevel& level, double max_error_m) {
   SimplifyOptions options;
+  options.simplifier = engine;
   options.max_error_m = max_error_m;
   options.metres_per_col = level.metres_per_col;
   options.metres_per_row = level.metres_per_row;
@@ -324,105 +330,150 @@ double seconds(std::chrono::steady_clock::time_point start) {
 
 TEST_SUITE("simplify") {
   TEST_CASE("on the Interlaken TIN locked borders and constraints survive and half the edges go") {
-    const RealLevel& level = interlaken();
-    const Partition partition = cellPartition(level.tin, level.dem, 48);
-    const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.02);
-    const SimplifyOptions options = optionsFor(level, std::numeric_limits<double>::infinity());
-    const auto start = std::chrono::steady_clock::now();
-    const ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
-    MESSAGE("Interlaken level: " << seconds(start) << " s");
-    const LevelReport report = checkLevel(level.dem, level.tin, partition, constraints, result, options.edge_ratio);
-    // Every cluster stops just below half its edges (3 edges go per collapse), unless the
-    // filter or its locked edges leave it stuck above: within 2 % of E of the ideal count.
-    const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
-    CHECK(ratio < report.expected_ratio + 0.02);
-    CHECK(ratio > report.expected_ratio - 0.02);
-    // Unbounded, the error grows beyond the TIN's 2 m.
-    CHECK(report.after.max_error_m > report.before.max_error_m);
+    for (const Simplifier engine : kEngines) {
+      CAPTURE(engineName(engine));
+      const RealLevel& level = interlaken();
+      const Partition partition = cellPartition(level.tin, level.dem, 48);
+      const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.02);
+      const SimplifyOptions options = optionsFor(engine, level, std::numeric_limits<double>::infinity());
+      const auto start = std::chrono::steady_clock::now();
+      const ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
+      MESSAGE("Interlaken level: " << seconds(start) << " s");
+      const LevelReport report = checkLevel(level.dem, level.tin, partition, constraints, result, options.edge_ratio);
+      // Every cluster stops just below half its edges (3 edges go per collapse), unless the
+      // filter or its locked edges leave it stuck above: within 2 % of E of the ideal count.
+      const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
+      CHECK(ratio < report.expected_ratio + 0.02);
+      CHECK(ratio > report.expected_ratio - 0.02);
+      // Unbounded, the error grows beyond the TIN's 2 m.
+      CHECK(report.after.max_error_m > report.before.max_error_m);
+    }
   }
 
   TEST_CASE("on the Interlaken TIN an error budget of 5 m holds on every pixel") {
-    const RealLevel& level = interlaken();
-    const Partition partition = cellPartition(level.tin, level.dem, 48);
-    const SimplifyOptions options = optionsFor(level, 5.0);
-    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
-    const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
-    CHECK(report.after.max_error_m <= 5.0);
-    CHECK(result.refused_for_error > 0);
-    // Two levels in a row: the coarser level simplified again stays within the budget.
-    const Partition coarser = cellPartition(result.mesh, level.dem, 96);
-    const ClusterSimplification again = simplify(level.dem, result.mesh, coarser, {}, options);
-    const LevelReport second = checkLevel(level.dem, result.mesh, coarser, {}, again, options.edge_ratio);
-    CHECK(second.after.max_error_m <= 5.0);
+    for (const Simplifier engine : kEngines) {
+      CAPTURE(engineName(engine));
+      const RealLevel& level = interlaken();
+      const Partition partition = cellPartition(level.tin, level.dem, 48);
+      const SimplifyOptions options = optionsFor(engine, level, 5.0);
+      const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+      const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
+      CHECK(report.after.max_error_m <= 5.0);
+      CHECK(result.refused_for_error > 0);
+      // Two levels in a row: the coarser level simplified again stays within the budget.
+      const Partition coarser = cellPartition(result.mesh, level.dem, 96);
+      const ClusterSimplification again = simplify(level.dem, result.mesh, coarser, {}, options);
+      const LevelReport second = checkLevel(level.dem, result.mesh, coarser, {}, again, options.edge_ratio);
+      CHECK(second.after.max_error_m <= 5.0);
+    }
   }
 
   TEST_CASE("on the SRTM N57E011 TIN in degrees borders constraints and the footprint are kept") {
-    const RealLevel& level = gothenburg();
-    const Partition partition = cellPartition(level.tin, level.dem, 150);
-    const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.01);
-    const SimplifyOptions options = optionsFor(level, 20.0);
-    const auto start = std::chrono::steady_clock::now();
-    const ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
-    MESSAGE("N57E011 level: " << seconds(start) << " s");
-    const LevelReport report = checkLevel(level.dem, level.tin, partition, constraints, result, options.edge_ratio);
-    CHECK(report.after.max_error_m <= 20.0);
-    const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
-    CHECK(ratio < report.expected_ratio + 0.05);
+    for (const Simplifier engine : kEngines) {
+      CAPTURE(engineName(engine));
+      const RealLevel& level = gothenburg();
+      const Partition partition = cellPartition(level.tin, level.dem, 150);
+      const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.01);
+      const SimplifyOptions options = optionsFor(engine, level, 20.0);
+      const auto start = std::chrono::steady_clock::now();
+      const ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
+      MESSAGE("N57E011 level: " << seconds(start) << " s");
+      const LevelReport report = checkLevel(level.dem, level.tin, partition, constraints, result, options.edge_ratio);
+      CHECK(report.after.max_error_m <= 20.0);
+      const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
+      CHECK(ratio < report.expected_ratio + 0.05);
+    }
   }
 
   TEST_CASE("on the Ontario lidar TIN with nodata the footprint and a 1 m budget hold") {
-    static const RealLevel level = loadLevel("ca_on_lidar_dtm_1m_26917.tif", 0.25, false);
-    const Partition partition = cellPartition(level.tin, level.dem, 64);
-    MESSAGE("vertices where a cluster's fans touch: " << pinchedVertices(level.tin, partition));
-    const SimplifyOptions options = optionsFor(level, 1.0);
-    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
-    const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
-    const auto nodata = std::count_if(level.dem.heights_m.begin(), level.dem.heights_m.end(),
-                                      [](float h) { return std::isnan(h); });
-    MESSAGE("nodata pixels: " << nodata << " of " << level.dem.pixelCount());
-    CHECK(nodata > 0);  // the holes are there
-    CHECK(report.after.covered_nodata_pixels == 0);
-    CHECK(report.after.max_error_m <= 1.0);
+    for (const Simplifier engine : kEngines) {
+      CAPTURE(engineName(engine));
+      static const RealLevel level = loadLevel("ca_on_lidar_dtm_1m_26917.tif", 0.25, false);
+      const Partition partition = cellPartition(level.tin, level.dem, 64);
+      MESSAGE("vertices where a cluster's fans touch: " << pinchedVertices(level.tin, partition));
+      const SimplifyOptions options = optionsFor(engine, level, 1.0);
+      const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+      const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
+      const auto nodata = std::count_if(level.dem.heights_m.begin(), level.dem.heights_m.end(),
+                                        [](float h) { return std::isnan(h); });
+      MESSAGE("nodata pixels: " << nodata << " of " << level.dem.pixelCount());
+      CHECK(nodata > 0);  // the holes are there
+      CHECK(report.after.covered_nodata_pixels == 0);
+      CHECK(report.after.max_error_m <= 1.0);
+    }
+  }
+
+  TEST_CASE("the native engine keeps the CGAL reference's quality on real levels") {
+    // Issue 15's bar under an error budget: at most 5 % more triangles than CGAL on the same
+    // clusters. (Without a budget, where the ratio alone stops both, the native engine's max
+    // error is not yet CGAL's: 29.0 m against 15.6 m on Interlaken; see the issue's notes.)
+    struct Case {
+      const RealLevel* level;
+      int cell_px;
+      double budget_m;
+    };
+    for (const Case& c : {Case{&interlaken(), 48, 5.0}, Case{&interlaken(), 48, 2.5}, Case{&gothenburg(), 150, 20.0}}) {
+      const RealLevel& level = *c.level;
+      const Partition partition = cellPartition(level.tin, level.dem, c.cell_px);
+      const ClusterSimplification native = simplify(level.dem, level.tin, partition, {},
+                                                    optionsFor(Simplifier::Native, level, c.budget_m));
+      const ClusterSimplification cgal = simplify(level.dem, level.tin, partition, {},
+                                                  optionsFor(Simplifier::Cgal, level, c.budget_m));
+      const TinErrorStatistics native_error = measureTin(level.dem, native.mesh);
+      const TinErrorStatistics cgal_error = measureTin(level.dem, cgal.mesh);
+      MESSAGE("budget " << c.budget_m << " m: triangles native " << native.mesh.triangleCount() << ", cgal "
+                        << cgal.mesh.triangleCount() << "; max error native " << native_error.max_error_m
+                        << " m, cgal " << cgal_error.max_error_m << " m; rms native " << native_error.rms_error_m
+                        << " m, cgal " << cgal_error.rms_error_m << " m");
+      CHECK(native_error.max_error_m <= c.budget_m);
+      CHECK(static_cast<double>(native.mesh.triangleCount()) <= 1.05 * static_cast<double>(cgal.mesh.triangleCount()));
+    }
   }
 
   TEST_CASE("the result is identical with one and two threads") {
-    const RealLevel& level = interlaken();
-    const Partition partition = cellPartition(level.tin, level.dem, 48);
-    const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.02);
-    const SimplifyOptions options = optionsFor(level, 10.0);
-    auto run = [&](int threads) {
-      tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
-      const auto start = std::chrono::steady_clock::now();
-      ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
-      MESSAGE("Interlaken level with " << threads << " thread(s): " << seconds(start) << " s");
-      return result;
-    };
-    const ClusterSimplification one = run(1);
-    const ClusterSimplification two = run(2);
-    REQUIRE(one.mesh.vertices.size() == two.mesh.vertices.size());
-    CHECK(std::equal(one.mesh.vertices.begin(), one.mesh.vertices.end(), two.mesh.vertices.begin(), sameBits));
-    CHECK(one.mesh.triangle_indices == two.mesh.triangle_indices);
-    CHECK(one.new_index_of_vertex == two.new_index_of_vertex);
-    CHECK(one.refused_for_error == two.refused_for_error);
-    CHECK(one.refused_for_flip == two.refused_for_flip);
+    for (const Simplifier engine : kEngines) {
+      CAPTURE(engineName(engine));
+      const RealLevel& level = interlaken();
+      const Partition partition = cellPartition(level.tin, level.dem, 48);
+      const auto constraints = randomConstraints(summarise(level.tin, &partition.cluster_of_face), 0.02);
+      const SimplifyOptions options = optionsFor(engine, level, 10.0);
+      auto run = [&](int threads) {
+        tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
+        const auto start = std::chrono::steady_clock::now();
+        ClusterSimplification result = simplify(level.dem, level.tin, partition, constraints, options);
+        MESSAGE("Interlaken level with " << threads << " thread(s): " << seconds(start) << " s");
+        return result;
+      };
+      const ClusterSimplification one = run(1);
+      const ClusterSimplification two = run(2);
+      REQUIRE(one.mesh.vertices.size() == two.mesh.vertices.size());
+      CHECK(std::equal(one.mesh.vertices.begin(), one.mesh.vertices.end(), two.mesh.vertices.begin(), sameBits));
+      CHECK(one.mesh.triangle_indices == two.mesh.triangle_indices);
+      CHECK(one.new_index_of_vertex == two.new_index_of_vertex);
+      CHECK(one.refused_for_error == two.refused_for_error);
+      CHECK(one.refused_for_flip == two.refused_for_flip);
+    }
   }
 
   TEST_CASE("split clusters pinched clusters single triangles and empty ids are simplified") {
-    const RealLevel& level = interlaken();
-    // A checkerboard of two clusters: each is many pieces that touch at cell corners (where
-    // the centroid rule also pinches fans), plus a one-triangle cluster and an empty id.
-    Partition partition = cellPartition(level.tin, level.dem, 40);
-    const int cells_x = (level.dem.width + 39) / 40;
-    for (std::int32_t& cluster : partition.cluster_of_face) cluster = (cluster % cells_x + cluster / cells_x) % 2;
-    partition.cluster_of_face[partition.cluster_of_face.size() / 2] = 2;
-    partition.cluster_count = 4;
-    const std::size_t pinched = pinchedVertices(level.tin, partition);
-    MESSAGE("vertices where a cluster's fans touch: " << pinched);
-    REQUIRE(pinched > 0);
-    const SimplifyOptions options = optionsFor(level, std::numeric_limits<double>::infinity());
-    const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
-    const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
-    CHECK(report.output_edges < report.input_edges * 0.6);
+    for (const Simplifier engine : kEngines) {
+      CAPTURE(engineName(engine));
+      const RealLevel& level = interlaken();
+      // A checkerboard of two clusters: each is many pieces that touch at cell corners (where
+      // the centroid rule also pinches fans), plus a one-triangle cluster and an empty id.
+      Partition partition = cellPartition(level.tin, level.dem, 40);
+      const int cells_x = (level.dem.width + 39) / 40;
+      for (std::int32_t& cluster : partition.cluster_of_face) cluster = (cluster % cells_x + cluster / cells_x) % 2;
+      partition.cluster_of_face[partition.cluster_of_face.size() / 2] = 2;
+      partition.cluster_count = 4;
+      const std::size_t pinched = pinchedVertices(level.tin, partition);
+      MESSAGE("vertices where a cluster's fans touch: " << pinched);
+      REQUIRE(pinched > 0);
+      const SimplifyOptions options = optionsFor(engine, level, std::numeric_limits<double>::infinity());
+      const ClusterSimplification result = simplify(level.dem, level.tin, partition, {}, options);
+      const LevelReport report = checkLevel(level.dem, level.tin, partition, {}, result, options.edge_ratio);
+      CHECK(report.output_edges < report.input_edges * 0.6);
+    }
   }
 
   TEST_CASE("an edge ratio of 1 gives back the input") {
