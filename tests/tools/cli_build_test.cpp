@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
 
@@ -227,5 +228,36 @@ TEST_SUITE("integration") {
     std::ifstream second_in(out + "/tileset.json");
     const std::string second((std::istreambuf_iterator<char>(second_in)), std::istreambuf_iterator<char>());
     CHECK(first == second);  // deterministic
+  }
+
+  TEST_CASE("build writes byte-identical tiles and tileset.json with one and two threads") {
+    test::TempDir dir;
+    const std::string input = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+    // The report holds stage times, so it is left out; 2 m keeps the builds short.
+    auto build = [&](const std::string& threads) {
+      const std::string out = dir / ("threads_" + threads);
+      const auto result = test::runTerratiles(
+          {"build", input, "-o", out, "-q", "--no-report", "--tin-max-error", "2", "--threads", threads});
+      CAPTURE(result.err);
+      REQUIRE(result.exit_code == 0);
+      std::map<std::string, std::string> files;  // relative path -> bytes
+      for (const auto& entry : fs::recursive_directory_iterator(out)) {
+        if (!entry.is_regular_file()) continue;
+        std::ifstream in(entry.path(), std::ios::binary);
+        files[fs::relative(entry.path(), out).string()] =
+            std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      }
+      return files;
+    };
+    const auto one = build("1");
+    const auto two = build("2");
+    CHECK(one.count("tileset.json") == 1);
+    CHECK(one.size() > 3);
+    REQUIRE(one.size() == two.size());
+    for (const auto& [path, bytes] : one) {
+      CAPTURE(path);
+      REQUIRE(two.count(path) == 1);
+      CHECK(two.at(path) == bytes);
+    }
   }
 }

@@ -55,6 +55,11 @@ TEST_SUITE("cli") {
     CHECK(bad_value.exit_code == 2);
     checkOneLineError(bad_value, "--tile-cells is 1; expected 2 to 4096");
     CHECK_FALSE(fs::exists(dir.path() / "out"));
+
+    const auto bad_threads = runTerratiles({"build", kInterlaken, "-o", dir / "out", "--threads", "-1"});
+    CHECK(bad_threads.exit_code == 2);
+    checkOneLineError(bad_threads, "--threads: Value -1 not in range 0 to 1024");
+    CHECK_FALSE(fs::exists(dir.path() / "out"));
   }
 
   TEST_CASE("bad inputs exit 3 and leave no output behind") {

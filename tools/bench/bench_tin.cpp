@@ -17,25 +17,14 @@
 //
 // Rasters with nodata are skipped for both tools (Delatin needs a complete grid and buildTin
 // rejects nodata). Needs `npm install` in tools/bench/delatin once (see tools/bench/README.md).
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <bit>
-#include <cerrno>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <string>
-#include <system_error>
 #include <vector>
 
 #include <tbb/global_control.h>
@@ -49,8 +38,6 @@
 #include "src/tin/measure_tin.h"
 #include "src/tin/tin_mesh.h"
 
-extern char** environ;
-
 using namespace terratiles;
 namespace fs = std::filesystem;
 
@@ -58,9 +45,6 @@ namespace {
 
 using bench::median;
 using bench::parseNumber;
-
-static_assert(std::endian::native == std::endian::little,
-              "the raw grid and Delatin's output file are little-endian");
 
 constexpr double kSpeedTarget = 5.0;          // Delatin time / our time, at least
 constexpr double kTriangleRatioTarget = 1.05;  // our triangles / Delatin's, at most
@@ -140,62 +124,6 @@ BenchOptions parseOptions(int argc, char** argv) {
   return options;
 }
 
-// A scratch directory for the raw grid and Delatin's meshes, removed on every exit path.
-class ScratchDirectory {
- public:
-  ScratchDirectory() {
-    std::string pattern = (fs::temp_directory_path() / "terratiles_bench_tin.XXXXXX").string();
-    if (!mkdtemp(pattern.data())) {
-      throw Error(ErrorCode::Output, pattern + ": cannot create a scratch directory: " +
-                                         std::strerror(errno) + " (set TMPDIR to a writable one)");
-    }
-    path_ = pattern;
-  }
-  ~ScratchDirectory() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  ScratchDirectory(const ScratchDirectory&) = delete;
-  ScratchDirectory& operator=(const ScratchDirectory&) = delete;
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
-void writeRawGrid(const DemGrid& dem, const fs::path& path) {
-  std::ofstream out(path, std::ios::binary);
-  out.write(reinterpret_cast<const char*>(dem.heights_m.data()),
-            static_cast<std::streamsize>(dem.heights_m.size() * sizeof(float)));
-  if (!out.flush()) throw Error(ErrorCode::Output, path.string() + ": cannot write the raw grid");
-}
-
-// Runs argv (argv[0] searched in PATH) with our stdout and stderr; throws unless it exits 0.
-void runProcess(const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
-  argv.push_back(nullptr);
-  std::fflush(stdout);
-  pid_t pid = 0;
-  if (const int code = posix_spawnp(&pid, argv[0], nullptr, nullptr, argv.data(), environ)) {
-    throw Error(ErrorCode::Usage, "cannot start " + args[0] + ": " + std::strerror(code) +
-                                      " (install Node.js >= 20 or pass --node PATH)");
-  }
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) throw Error(ErrorCode::Internal, "waitpid: " + std::string(std::strerror(errno)));
-  }
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    std::string command;
-    for (const std::string& arg : args) command += (command.empty() ? "" : " ") + arg;
-    throw Error(ErrorCode::Internal,
-                command + ": " +
-                    (WIFEXITED(status) ? "exited with status " + std::to_string(WEXITSTATUS(status))
-                                       : "killed by signal " + std::to_string(WTERMSIG(status))) +
-                    " (did you run npm install in tools/bench/delatin?)");
-  }
-}
-
 struct DelatinResult {
   TinMesh mesh;
   double build_s = 0;       // median of new Delatin() + run()
@@ -204,39 +132,20 @@ struct DelatinResult {
   std::size_t flipped_triangles = 0;  // clockwise from above, flipped to our convention
 };
 
-// Reads the file run_delatin.mjs writes (its header comment is the format) into our frame:
-// Delatin's coords are (x = column, y = row) pixel indices; heights come from the DEM.
-DelatinResult readDelatinMesh(const fs::path& path, const DemGrid& dem) {
-  std::ifstream in(path, std::ios::binary);
-  const std::vector<char> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  const std::string where = path.string() + ": ";
-  constexpr std::size_t kHeaderBytes = 8 + 4 * 4 + 4 * 8;
-  if (bytes.size() < kHeaderBytes || std::memcmp(bytes.data(), "DELATIN1", 8) != 0) {
-    throw Error(ErrorCode::Internal, where + "not a run_delatin.mjs output (no DELATIN1 header)");
-  }
-  std::uint32_t counts[4];
-  double values[4];
-  std::memcpy(counts, bytes.data() + 8, sizeof counts);
-  std::memcpy(values, bytes.data() + 8 + sizeof counts, sizeof values);
-  const std::size_t vertex_count = counts[0], triangle_count = counts[1];
-  if (bytes.size() != kHeaderBytes + 4 * (2 * vertex_count + 3 * triangle_count)) {
-    throw Error(ErrorCode::Internal, where + std::to_string(bytes.size()) + " bytes, expected " +
-                                         std::to_string(kHeaderBytes + 4 * (2 * vertex_count + 3 * triangle_count)));
-  }
+// Delatin's output in our frame: its coords are (x = column, y = row) pixel indices; heights
+// come from the DEM.
+DelatinResult toDelatinResult(const bench::DelatinOutput& output, const DemGrid& dem) {
   DelatinResult result;
-  result.build_s = values[0];
-  result.run_only_s = values[1];
-  result.own_max_error_m = values[2];
-  std::vector<std::uint32_t> coords(2 * vertex_count);
-  std::memcpy(coords.data(), bytes.data() + kHeaderBytes, coords.size() * 4);
-  result.mesh.triangle_indices.resize(3 * triangle_count);
-  std::memcpy(result.mesh.triangle_indices.data(), bytes.data() + kHeaderBytes + coords.size() * 4,
-              result.mesh.triangle_indices.size() * 4);
+  result.build_s = output.build_s;
+  result.run_only_s = output.run_only_s;
+  result.own_max_error_m = output.own_max_error_m;
+  const std::size_t vertex_count = output.vertexCount();
+  result.mesh.triangle_indices = output.triangles;
   result.mesh.vertices.resize(vertex_count);
   for (std::size_t v = 0; v < vertex_count; ++v) {
-    const std::uint32_t col = coords[2 * v], row = coords[2 * v + 1];
+    const std::uint32_t col = output.coords[2 * v], row = output.coords[2 * v + 1];
     if (col >= static_cast<std::uint32_t>(dem.width) || row >= static_cast<std::uint32_t>(dem.height)) {
-      throw Error(ErrorCode::Internal, where + "vertex " + std::to_string(v) + " at (" +
+      throw Error(ErrorCode::Internal, "Delatin's vertex " + std::to_string(v) + " at (" +
                                            std::to_string(col) + ", " + std::to_string(row) +
                                            ") is outside the grid");
     }
@@ -244,7 +153,7 @@ DelatinResult readDelatinMesh(const fs::path& path, const DemGrid& dem) {
                                dem.heightAt(static_cast<std::int32_t>(col), static_cast<std::int32_t>(row))};
   }
   for (const std::uint32_t index : result.mesh.triangle_indices) {
-    if (index >= vertex_count) throw Error(ErrorCode::Internal, where + "triangle index out of range");
+    if (index >= vertex_count) throw Error(ErrorCode::Internal, "Delatin's triangle index out of range");
   }
   return result;
 }
@@ -324,7 +233,7 @@ void benchRaster(const std::string& path, const BenchOptions& options, const fs:
               "triangles", "vertices", "max [m]", "rms [m]", "checks");
 
   const fs::path raw = scratch / "grid.f32";
-  writeRawGrid(dem, raw);
+  bench::writeRawGrid(dem.heights_m, raw);
   for (const double max_error_m : options.max_errors_m) {
     // Side by side: run r times ours, then Delatin (its own process: one warm-up build, then
     // one timed), so both see the same machine state; noise that lasts longer than a pair
@@ -333,8 +242,6 @@ void benchRaster(const std::string& path, const BenchOptions& options, const fs:
     const TinOptions tin_options{.max_error_m = max_error_m};
     std::fprintf(stderr, "%s at %g m: warm-up\n", name.c_str(), max_error_m);
     TinMesh ours = buildTin(dem, tin_options, quiet);  // warm-up
-    char error_text[64];
-    std::snprintf(error_text, sizeof error_text, "%.17g", max_error_m);
     const fs::path out = scratch / "delatin.bin";
     std::vector<double> ours_runs, delatin_runs, delatin_run_only, ratios;
     DelatinResult delatin;
@@ -343,9 +250,8 @@ void benchRaster(const std::string& path, const BenchOptions& options, const fs:
       const auto start = std::chrono::steady_clock::now();
       ours = buildTin(dem, tin_options, quiet);
       ours_runs.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-      runProcess({options.node, options.script, raw.string(), std::to_string(dem.width),
-                  std::to_string(dem.height), error_text, "1", out.string()});
-      delatin = readDelatinMesh(out, dem);
+      delatin = toDelatinResult(
+          bench::runDelatin(options.node, options.script, raw, dem.width, dem.height, max_error_m, out), dem);
       delatin_runs.push_back(delatin.build_s);
       delatin_run_only.push_back(delatin.run_only_s);
       ratios.push_back(delatin.build_s / ours_runs.back());
@@ -385,7 +291,7 @@ int runBench(int argc, char** argv) {
   // Delatin is single-threaded; by default so is buildTin here (it may use TBB internally).
   tbb::global_control threads(tbb::global_control::max_allowed_parallelism,
                               static_cast<std::size_t>(options.threads));
-  ScratchDirectory scratch;
+  bench::ScratchDirectory scratch("terratiles_bench_tin");
   std::vector<Row> summary;
   for (const std::string& raster : options.rasters) benchRaster(raster, options, scratch.path(), summary);
 

@@ -556,6 +556,10 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   build_command
       ->add_option("--draco-speed", build.draco_speed, "Draco encoder speed, 0 (smallest files) to 10 (fastest)")
       ->capture_default_str();
+  int build_threads = 0;  // 0: all cores
+  build_command->add_option("--threads", build_threads, "Threads to use (0: all cores); the output is the same")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   addProgressOptions(*build_command, quiet, progress_choice);
 
   std::string transform_from, transform_to, transform_geoid;
@@ -762,6 +766,10 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                                       "(a geoid only applies to orthometric heights)");
       }
       build.heights = HeightReference::Ellipsoidal;
+    }
+    std::optional<tbb::global_control> thread_limit;
+    if (build_threads > 0) {
+      thread_limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(build_threads));
     }
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
