@@ -3,7 +3,7 @@
 // on the same meshes and the same METIS clusters, on one core.
 //
 //   terratiles_bench_lod RASTER... [--tin-max-error 0.5] [--levels 4] [--cluster-triangles 1024]
-//                        [--runs 3]
+//                        [--runs 3] [--simplifier native|cgal]
 //
 // For each raster: reads it with readDem and builds the finest TIN once (buildTin at
 // --tin-max-error, untimed, all cores). Then --levels levels on ONE thread
@@ -83,16 +83,18 @@ struct BenchOptions {
   int levels = 4;
   int cluster_triangles = 1024;
   int runs = 3;
+  Simplifier simplifier = Simplifier::Native;
 };
 
 constexpr const char* kUsage =
     "usage: terratiles_bench_lod RASTER... [--tin-max-error 0.5] [--levels 4]\n"
-    "                            [--cluster-triangles 1024] [--runs 3]\n"
+    "                            [--cluster-triangles 1024] [--runs 3] [--simplifier native]\n"
     "  --tin-max-error      max vertical error of the finest TIN, metres (default 0.5; 10 suits SRTM)\n"
     "  --levels             coarser levels to build, each from the one before (default 4)\n"
     "  --cluster-triangles  METIS clusters per level: ceil(triangles / this) (default 1024)\n"
     "  --runs               timed runs per step and level, after one untimed warm-up; the median\n"
-    "                       is reported (default 3)\n";
+    "                       is reported (default 3)\n"
+    "  --simplifier         terratiles' engine: native (default) or cgal (the reference)\n";
 
 int parseCount(const std::string& text, const std::string& option, int min, int max) {
   const double value = parseNumber(text, option);
@@ -126,6 +128,12 @@ BenchOptions parseOptions(int argc, char** argv) {
       options.cluster_triangles = parseCount(value(), arg, 1, std::numeric_limits<std::int32_t>::max());
     } else if (arg == "--runs") {
       options.runs = parseCount(value(), arg, 1, 1000);
+    } else if (arg == "--simplifier") {
+      const std::string text = value();
+      if (text != "native" && text != "cgal") {
+        throw Error(ErrorCode::Usage, "--simplifier expects native or cgal, found " + text);
+      }
+      options.simplifier = text == "cgal" ? Simplifier::Cgal : Simplifier::Native;
     } else if (arg.starts_with("-")) {
       throw Error(ErrorCode::Usage, "unknown option " + arg + " (see --help)");
     } else {
@@ -291,15 +299,16 @@ RasterSummary benchRaster(const std::string& path, const BenchOptions& options) 
   std::printf("finest TIN at %g m: %zu triangles, %zu vertices, max %.3f m, rms %.4f m (built untimed)\n",
               options.tin_max_error_m, current.triangleCount(), current.vertices.size(),
               finest_error.max_error_m, finest_error.rms_error_m);
-  std::printf("one thread; per step 1 warm-up + %d timed runs, medians; both tools simplify the same "
-              "mesh (terratiles' previous level) with the same clusters to %g\n",
-              options.runs, kLevelRatio);
+  std::printf("one thread; terratiles' %s engine; per step 1 warm-up + %d timed runs, medians; both tools "
+              "simplify the same mesh (terratiles' previous level) with the same clusters to %g\n",
+              options.simplifier == Simplifier::Cgal ? "cgal" : "native", options.runs, kLevelRatio);
   printHeader();
 
   // Everything timed runs on one core: meshoptimizer is single-threaded, simplifyClusters and
   // the partition would otherwise use TBB's workers.
   const tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
   SimplifyOptions simplify;
+  simplify.simplifier = options.simplifier;
   simplify.edge_ratio = kLevelRatio;  // max_error_m stays infinite: the ratio alone stops it
   simplify.metres_per_col = metres[0];
   simplify.metres_per_row = metres[1];
