@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -47,8 +48,6 @@ struct Collapse {
   }
 };
 
-constexpr double kPassShare = 0.5;
-
 // One thread's arrays, reused for every cluster it simplifies.
 struct ClusterArrays {
   std::vector<std::uint32_t> local_of_vertex;  // per input vertex: its local index, or kNone
@@ -57,15 +56,24 @@ struct ClusterArrays {
   std::vector<EcefPoint> ecef;
   std::vector<std::array<double, 3>> metres;   // x east, y north, z up, from the cluster's first vertex
   std::vector<Quadric> quadric;
-  std::vector<std::uint8_t> locked, touched;
-  // Per local vertex: its star changed since the filter last refused all its collapses (or it
-  // was never tried), so it is worth trying again.
-  std::vector<std::uint8_t> dirty;
+  std::vector<std::uint8_t> locked, removed;
   std::vector<std::uint32_t> corners;          // 3 local vertices per local triangle
   std::vector<std::uint8_t> alive;             // per local triangle
-  std::vector<std::uint32_t> star_start, star, star_fill;  // per local vertex: its alive triangles (CSR, per pass)
-  std::vector<std::pair<double, std::uint32_t>> ranking;  // (cheapest collapse, free vertex)
-  std::vector<std::uint32_t> u_triangles, u_ring, v_triangles, v_ring;
+  // Per local vertex: the triangles it was in at the start (CSR). A vertex's triangles now are
+  // those of the vertices it absorbed too: `absorbed_next` chains them from the vertex itself
+  // (kNone ends a chain, `absorbed_last` is its last link).
+  std::vector<std::uint32_t> star_start, star, star_fill;
+  std::vector<std::uint32_t> absorbed_next, absorbed_last;
+  // The queue: (cheapest collapse, vertex, stamp); an entry whose stamp is not the vertex's
+  // latest is stale.
+  struct Entry {
+    double cost;
+    std::uint32_t u, stamp;
+    bool operator>(const Entry& other) const { return cost != other.cost ? cost > other.cost : u > other.u; }
+  };
+  std::vector<Entry> queue;
+  std::vector<std::uint32_t> stamp;
+  std::vector<std::uint32_t> u_triangles, u_ring, v_triangles, v_ring, around;
   std::vector<Collapse> targets;  // the collapses of the vertex under way
 };
 
@@ -257,58 +265,60 @@ class ClusterCollapser {
     }
   }
 
-  // u's alive triangles and its ring (the vertex after u in each).
+  // u's alive triangles and its ring (the vertex after u in each). Each alive triangle holding u
+  // holds exactly one vertex of u's chain (two would have made it vanish when they merged).
   void gatherStar(std::uint32_t u, std::vector<std::uint32_t>& triangles, std::vector<std::uint32_t>& ring) const {
     triangles.clear();
     ring.clear();
-    for (std::uint32_t i = a_.star_start[u]; i < a_.star_start[u + 1]; ++i) {
-      const std::uint32_t t = a_.star[i];
-      if (!a_.alive[t]) continue;
-      triangles.push_back(t);
-      ring.push_back(after(t, u));
+    for (std::uint32_t owner = u; owner != kNone; owner = a_.absorbed_next[owner]) {
+      for (std::uint32_t i = a_.star_start[owner]; i < a_.star_start[owner + 1]; ++i) {
+        const std::uint32_t t = a_.star[i];
+        const std::uint32_t* c = &a_.corners[3 * t];
+        if (!a_.alive[t] || (c[0] != u && c[1] != u && c[2] != u)) continue;
+        triangles.push_back(t);
+        ring.push_back(after(t, u));
+      }
     }
   }
 
+  // Queues u (free, not removed) at its cheapest collapse, superseding its earlier entries.
+  void enqueue(std::uint32_t u) {
+    if (a_.locked[u] || a_.removed[u]) return;
+    gatherStar(u, a_.u_triangles, a_.u_ring);
+    double best = std::numeric_limits<double>::infinity();
+    for (const std::uint32_t v : a_.u_ring) {
+      best = std::min(best, cost(u, v));
+      if (!a_.locked[v]) {
+        const Collapse moved = quadricOptimum(u, v);
+        if (moved.moves) best = std::min(best, moved.cost);
+      }
+    }
+    ++a_.stamp[u];
+    if (!std::isfinite(best)) return;
+    a_.queue.push_back({best, u, a_.stamp[u]});
+    std::push_heap(a_.queue.begin(), a_.queue.end(), std::greater<>());
+  }
+
+  // Greedy, as CGAL's edge_collapse: always the cheapest queued vertex next; a vertex the
+  // filter refused every way comes back when a collapse changes its star.
   void collapse(ClusterOutput& out) {
     const std::size_t vertices = a_.identity.size();
-    a_.touched.resize(vertices);
-    a_.dirty.assign(vertices, 1);
-    while (wantsMore()) {
-      buildStars();
-      a_.ranking.clear();
-      for (std::uint32_t u = 0; u < vertices; ++u) {
-        if (a_.locked[u] || !a_.dirty[u] || a_.star_start[u] == a_.star_start[u + 1]) continue;
-        double best = std::numeric_limits<double>::infinity();
-        for (std::uint32_t i = a_.star_start[u]; i < a_.star_start[u + 1]; ++i) {
-          const std::uint32_t v = after(a_.star[i], u);
-          best = std::min(best, cost(u, v));
-          if (!a_.locked[v] && v > u) {
-            const Collapse moved = quadricOptimum(u, v);
-            if (moved.moves) best = std::min(best, moved.cost);
-          }
-        }
-        a_.ranking.emplace_back(best, u);
-      }
-      if (a_.ranking.empty()) return;
-      std::sort(a_.ranking.begin(), a_.ranking.end());
-      // Each collapse removes three edges. As in meshoptimizer, a pass takes collapses up to
-      // 1.5 times the cost of the last one its goal needs, since many are skipped for sharing
-      // a vertex with an earlier one; the goal is half of what the cluster still needs, so
-      // the ranking is renewed at least once more (measured on Interlaken at a 5 m budget:
-      // rms 1.248 -> 1.215 m against CGAL's 1.159 m, same triangles).
-      const double needed = static_cast<double>(edges_) - options_.edge_ratio * static_cast<double>(initial_edges_);
-      const auto goal = static_cast<std::size_t>(std::max(0.0, kPassShare * needed / 3));
-      const double cost_limit =
-          goal < a_.ranking.size() ? 1.5 * a_.ranking[goal].first : std::numeric_limits<double>::infinity();
-      std::fill(a_.touched.begin(), a_.touched.begin() + static_cast<std::ptrdiff_t>(vertices), 0);
-      std::size_t applied = 0;
-      for (const auto& [rank_cost, u] : a_.ranking) {
-        if (!wantsMore()) return;
-        if (rank_cost > cost_limit && applied > 0) break;
-        if (a_.touched[u]) continue;
-        if (tryCollapse(u, out)) ++applied;
-      }
-      if (applied == 0) return;
+    buildStars();
+    a_.absorbed_next.assign(vertices, kNone);
+    a_.absorbed_last.resize(vertices);
+    for (std::uint32_t v = 0; v < vertices; ++v) a_.absorbed_last[v] = v;
+    a_.removed.assign(vertices, 0);
+    a_.stamp.assign(vertices, 0);
+    a_.queue.clear();
+    for (std::uint32_t u = 0; u < vertices; ++u) {
+      if (a_.star_start[u] != a_.star_start[u + 1]) enqueue(u);
+    }
+    while (wantsMore() && !a_.queue.empty()) {
+      std::pop_heap(a_.queue.begin(), a_.queue.end(), std::greater<>());
+      const ClusterArrays::Entry entry = a_.queue.back();
+      a_.queue.pop_back();
+      if (entry.stamp != a_.stamp[entry.u] || a_.removed[entry.u]) continue;
+      tryCollapse(entry.u, out);
     }
   }
 
@@ -316,12 +326,7 @@ class ClusterCollapser {
   bool tryCollapse(std::uint32_t u, ClusterOutput& out) {
     gatherStar(u, a_.u_triangles, a_.u_ring);
     a_.targets.clear();
-    bool skipped = false;
     for (const std::uint32_t v : a_.u_ring) {
-      if (a_.touched[v]) {
-        skipped = true;
-        continue;
-      }
       a_.targets.push_back({cost(u, v), v, false, a_.grid[v]});
       if (!a_.locked[v]) {
         const Collapse moved = quadricOptimum(u, v);
@@ -350,9 +355,7 @@ class ClusterCollapser {
       apply(u, v, collapse.moves, placed, placed_ecef);
       return true;
     }
-    // Refused every way (not just put off this pass): not tried again until its star changes.
-    if (!skipped) a_.dirty[u] = 0;
-    return false;
+    return false;  // not queued again until a collapse changes its star
   }
 
   // The link condition of an interior edge: u and v share exactly the two vertices opposite
@@ -423,11 +426,17 @@ class ClusterCollapser {
       a_.grid[v] = placed;
       a_.metres[v] = metresOf(placed);
       if (options_.globe) a_.ecef[v] = placed_ecef;
-      for (const std::uint32_t w : a_.v_ring) a_.dirty[w] = 1;
     }
-    for (const std::uint32_t w : a_.u_ring) a_.dirty[w] = 1;
-    a_.touched[u] = a_.touched[v] = 1;
+    a_.removed[u] = 1;
+    ++a_.stamp[u];
+    a_.absorbed_next[a_.absorbed_last[v]] = u;
+    a_.absorbed_last[v] = a_.absorbed_last[u];
     edges_ -= 3;
+    // v's star now holds u's: v and every vertex around it have new collapses.
+    gatherStar(v, a_.v_triangles, a_.v_ring);
+    a_.around.assign(a_.v_ring.begin(), a_.v_ring.end());  // enqueue reuses the star arrays
+    enqueue(v);
+    for (const std::uint32_t w : a_.around) enqueue(w);
   }
 
   const LevelInput& in_;

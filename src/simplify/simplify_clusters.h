@@ -5,23 +5,22 @@
 //
 // Two engines do the collapses (SimplifyOptions::simplifier); both keep the rules below.
 //
-// Simplifier::Native (`--simplifier native`, 4-6x faster than CGAL; not yet the default: its
-// levels' geometricError runs up to 23 % above CGAL's on SRTM Gabon, issue 15): terratiles'
-// own edge collapse over flat arrays. A vertex
-// is free when none of its edges is locked (a locked edge is on the dataset's outer border,
-// between two clusters or a constraint), so a free vertex's star is closed and inside its
-// cluster. A collapse removes a free vertex u into a neighbour v: when v is locked, u goes to v
-// (a half-edge collapse, v stays where it is); when v is free too, either that, or v moves to
-// the edge's quadric optimum (the 3x3 solve of CGAL's placement below, when well
-// conditioned). The two triangles of edge uv vanish. Costs: Garland-Heckbert plane quadrics
-// in metres (unit face normals, as CGAL's), (Q_u + Q_v) at the new position. The cluster works
-// in passes: each pass ranks the free vertices by their cheapest collapse (ties by vertex
-// order), then takes them in that order, trying each vertex's collapses from the cheapest and
-// applying the first the filter accepts, while no vertex takes part in two collapses of one
-// pass; as in meshoptimizer, a pass stops at 1.5 times the cost of the last collapse the edge
-// target needs, and the next pass re-ranks. A vertex the filter refused every way is tried
-// again only when a collapse changes its star. It never allocates per collapse: each thread
-// keeps one set of arrays for all its clusters.
+// Simplifier::Native (`--simplifier native`: 3-6x faster than CGAL; not yet the default, see
+// issue 15's notes): terratiles' own edge collapse over flat arrays. A vertex is free when
+// none of its edges is locked (a locked edge is on the dataset's outer border, between two
+// clusters or a constraint), so a free vertex's star is closed and inside its cluster. A
+// collapse removes a free vertex u into a neighbour v: when v is locked, u goes to v (a
+// half-edge collapse, v stays where it is); when v is free too, either that, or v moves to the
+// edge's quadric optimum (the 3x3 solve of CGAL's placement below, when well conditioned), or
+// to the best point of the segment uv. The two triangles of edge uv vanish. Costs:
+// Garland-Heckbert plane quadrics in metres (unit face normals, as CGAL's), (Q_u + Q_v) at the
+// new position. Greedy like CGAL's: a binary heap holds every free vertex at its cheapest
+// collapse (ties by vertex order); the cheapest is tried first, its collapses from the
+// cheapest, and the first the filter accepts is applied; the merged vertex and its ring are
+// queued again at their new costs, and a vertex the filter refused every way comes back when a
+// collapse changes its star. A vertex's triangles are its initial ones (CSR) plus those of
+// the vertices it absorbed (a chain), so nothing allocates per collapse: each thread keeps one
+// set of arrays for all its clusters.
 //
 // Simplifier::Cgal (the default and the quality reference): each cluster's triangles
 // become one CGAL::Surface_mesh (Simple_cartesian<double>, points (col * metres_per_col,
@@ -77,7 +76,7 @@
 // [0, cluster_count) per triangle, or a constrained edge is not an edge of the mesh; throws
 // Error(ErrorCode::Usage) for options out of range. Memory: O(triangles) for the topology plus
 // one cluster's arrays (native) or Surface_mesh (CGAL) per thread. Time: O(F log F) plus the
-// collapses: per cluster O(E log E) (native: per pass), and with a finite budget
+// collapses: per cluster O(E log E), and with a finite budget
 // O(pixels under the star) per collapse tried.
 
 #include <array>
