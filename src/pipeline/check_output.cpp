@@ -5,8 +5,10 @@
 #include <ogr_spatialref.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -133,13 +135,41 @@ class ToDemCrs {
   tbb::enumerable_thread_specific<std::unique_ptr<OGRCoordinateTransformation>> per_thread_;
 };
 
-// Decodes a tile and measures it (see the header): its coverage, its drawn error against the
-// DEM and against the finer zoom's surface (adding its own to `surface`), its outline.
-void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* geoid, ToDemCrs& to_dem,
-                      double widest_step_m, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile) {
+// The distinct values of `pixels`, ascending (a bitmap over their range: a tile's pixels
+// span a block of rows, and sorting millions of repeats costs more).
+std::vector<std::uint32_t> sortedUnique(const std::vector<std::uint32_t>& pixels) {
+  std::vector<std::uint32_t> out;
+  if (pixels.empty()) return out;
+  const auto [lo, hi] = std::minmax_element(pixels.begin(), pixels.end());
+  const std::uint32_t first = *lo;
+  std::vector<std::uint64_t> bits((static_cast<std::size_t>(*hi - first) >> 6) + 1, 0);
+  for (const std::uint32_t p : pixels) bits[(p - first) >> 6] |= std::uint64_t{1} << ((p - first) & 63);
+  std::size_t count = 0;
+  for (const std::uint64_t word : bits) count += static_cast<std::size_t>(std::popcount(word));
+  out.reserve(count);
+  for (std::size_t w = 0; w < bits.size(); ++w) {
+    for (std::uint64_t word = bits[w]; word != 0; word &= word - 1) {
+      out.push_back(first + static_cast<std::uint32_t>((w << 6) + static_cast<std::size_t>(std::countr_zero(word))));
+    }
+  }
+  return out;
+}
+
+// A decoded tile between decodeTile and measureTile.
+struct DecodedTile {
+  std::vector<EcefPoint> ecef;  // as decoded
+  std::vector<GridCorner> grid;
+  std::vector<std::uint32_t> indices;
+  std::vector<std::uint32_t> covered;  // valid pixels inside its triangles in the grid (repeats)
+};
+
+// Decodes a tile (see the header): its outline, its coverage in the grid, its region. Needs no
+// other tile, so it runs ahead of the measures, which go zoom by zoom.
+void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* geoid, ToDemCrs& to_dem,
+                double widest_step_m, CheckTile& tile, DecodedTile& out) {
   const DemGrid& dem = globe.dem();
-  const DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
-  const GlbMesh& mesh = decoded.mesh;
+  DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
+  GlbMesh& mesh = decoded.mesh;
   const auto& earth = GeographicLib::Geocentric::WGS84();
   const std::size_t n = mesh.vertexCount();
   std::vector<EcefPoint> ecef(n);
@@ -254,12 +284,6 @@ void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
     rasterise({v1.col, pole_row, 0}, {v2.col, pole_row, 0}, v2);
     rasterise({v1.col, pole_row, 0}, v2, v1);
   }
-  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them).
-  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface, &covered);
-  std::sort(covered.begin(), covered.end());
-  covered.erase(std::unique(covered.begin(), covered.end()), covered.end());
-  tile.pixels = std::move(covered);
-
   const Region content = drawnRegion(ecef, idx);
   const auto& r = tile.region;
   tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&
@@ -273,6 +297,21 @@ void checkTileContent(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
     tile.vertex_grid[v] = {lattice[v].col, lattice[v].row};
     tile.vertex_ecef[v] = {ecef[v].x, ecef[v].y, ecef[v].z};
   }
+  out.ecef = std::move(ecef);
+  out.grid = std::move(grid);
+  out.indices = std::move(mesh.triangle_indices);
+  out.covered = std::move(covered);
+}
+
+// Measures a decoded tile: its drawn error against the DEM and against the finer zoom's
+// surface (adding its own to `surface`) and the pixels its verticals meet; frees `decoded`.
+void measureTile(const DemOnGlobe& globe, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile,
+                 DecodedTile& decoded) {
+  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them).
+  tile.measure = measureDrawnTile(globe, decoded.ecef, decoded.grid, decoded.indices, 1e-3, finer, &surface,
+                                  &decoded.covered);
+  tile.pixels = sortedUnique(decoded.covered);
+  decoded = DecodedTile{};
 }
 
 // Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that
@@ -376,6 +415,42 @@ std::array<int, 2> unbalancedPair(const std::vector<int>& cut, const std::vector
   return {-1, -1};
 }
 
+// The pixels by the set of tiles covering them. Class 0 is the empty set; class c > 0 is the
+// set of class parent[c] (created before it) with tile[c] added. footprint_pixels[c]: the
+// footprint pixels whose set is exactly class c's.
+struct PixelClasses {
+  std::vector<std::uint32_t> parent{0};
+  std::vector<std::uint32_t> tile{0};
+  std::vector<std::size_t> footprint_pixels;
+};
+
+PixelClasses coverageClasses(const std::vector<CheckTile>& tiles, const std::vector<std::uint8_t>& footprint) {
+  PixelClasses classes;
+  std::vector<std::uint32_t> class_of(footprint.size(), 0);
+  // Per class, the class it became in the current tile (valid where refined_in == tile + 1).
+  std::vector<std::uint32_t> refined{0}, refined_in{0};
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    const auto stamp = static_cast<std::uint32_t>(t + 1);
+    for (const std::uint32_t p : tiles[t].pixels) {
+      const std::uint32_t old = class_of[p];
+      if (refined_in[old] != stamp) {
+        refined_in[old] = stamp;
+        refined[old] = static_cast<std::uint32_t>(classes.parent.size());
+        classes.parent.push_back(old);
+        classes.tile.push_back(static_cast<std::uint32_t>(t));
+        refined.push_back(0);
+        refined_in.push_back(0);
+      }
+      class_of[p] = refined[old];
+    }
+  }
+  classes.footprint_pixels.assign(classes.parent.size(), 0);
+  for (std::size_t p = 0; p < footprint.size(); ++p) {
+    if (footprint[p]) ++classes.footprint_pixels[class_of[p]];
+  }
+  return classes;
+}
+
 bool isAncestor(int ancestor, int tile, const std::vector<CheckTile>& tiles) {
   for (int t = tile; t >= 0; t = tiles[static_cast<std::size_t>(t)].parent) {
     if (t == ancestor) return true;
@@ -425,19 +500,42 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   if (report.tiles == 0) throw Error(ErrorCode::Input, output_dir + ": tileset.json has no content");
   report.zooms = static_cast<std::size_t>(max_zoom - min_zoom + 1);
   progress.beginStage("decoding and measuring tiles", report.tiles);
-  ZoomSurface finer;
-  for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
-    std::vector<std::size_t> at_zoom;
+  {
+    std::vector<std::vector<std::size_t>> at_zoom(static_cast<std::size_t>(max_zoom + 1));
     for (std::size_t i = 0; i < tiles.size(); ++i) {
-      if (!tiles[i].uri.empty() && tiles[i].key.zoom == zoom) at_zoom.push_back(i);
+      if (!tiles[i].uri.empty()) at_zoom[static_cast<std::size_t>(tiles[i].key.zoom)].push_back(i);
     }
-    ZoomSurface surface(dem.pixelCount());
-    tbb::parallel_for(std::size_t{0}, at_zoom.size(), [&](std::size_t k) {
-      checkTileContent(dir, globe, geoid ? &*geoid : nullptr, to_dem, widest_step_m, finer.empty() ? nullptr : &finer,
-                       surface, tiles[at_zoom[k]]);
-    });
-    finer = std::move(surface);
-    progress.advance(at_zoom.size());
+    std::vector<DecodedTile> decoded(tiles.size());
+    // The next coarser zoom is decoded in the background while a zoom is measured. Declared
+    // after what its tasks use: its destructor waits for them.
+    tbb::task_group decoding;
+    const auto decodeZoom = [&](std::int32_t zoom) {
+      for (const std::size_t i : at_zoom[static_cast<std::size_t>(zoom)]) {
+        decoding.run([&, i] {
+          decodeTile(dir, globe, geoid ? &*geoid : nullptr, to_dem, widest_step_m, tiles[i], decoded[i]);
+        });
+      }
+    };
+    try {
+      decodeZoom(max_zoom);
+      decoding.wait();
+      ZoomSurface finer;
+      for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
+        if (zoom > min_zoom) decodeZoom(zoom - 1);
+        const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
+        ZoomSurface surface(dem.pixelCount());
+        tbb::parallel_for(std::size_t{0}, here.size(), [&](std::size_t k) {
+          measureTile(globe, finer.empty() ? nullptr : &finer, surface, tiles[here[k]], decoded[here[k]]);
+        });
+        decoding.wait();
+        finer = std::move(surface);
+        progress.advance(here.size());
+      }
+    } catch (...) {
+      decoding.cancel();
+      decoding.wait();
+      throw;
+    }
   }
   progress.endStage();
 
@@ -511,15 +609,20 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
       }
     }
   }
-  std::vector<std::uint32_t> stamp(dem.pixelCount(), 0);
-  std::uint32_t cut_id = 0;
+  // The footprint pixels by the set of tiles whose content covers them, exactly (partition
+  // refinement: a class is a set of tiles, made from its parent class by one tile more), so a
+  // cut is counted per class instead of per pixel: a pixel is a hole of a cut when no tile of
+  // its class is in the cut.
+  const PixelClasses classes = coverageClasses(tiles, footprint);
+  std::vector<std::uint8_t> in_cut(tiles.size(), 0), class_covered(classes.parent.size(), 0);
   const auto holesOf = [&](const std::vector<int>& cut) {
-    ++cut_id;
-    for (const int t : cut) {
-      for (const std::uint32_t p : tiles[static_cast<std::size_t>(t)].pixels) stamp[p] = cut_id;
-    }
+    for (const int t : cut) in_cut[static_cast<std::size_t>(t)] = 1;
     std::size_t holes = 0;
-    for (std::size_t p = 0; p < footprint.size(); ++p) holes += footprint[p] && stamp[p] != cut_id;
+    for (std::size_t c = 0; c < classes.parent.size(); ++c) {
+      class_covered[c] = c > 0 && (class_covered[classes.parent[c]] || in_cut[classes.tile[c]]);
+      if (!class_covered[c]) holes += classes.footprint_pixels[c];
+    }
+    for (const int t : cut) in_cut[static_cast<std::size_t>(t)] = 0;
     return holes;
   };
   const auto describeCut = [&](const std::vector<int>& cut) {

@@ -57,7 +57,6 @@ DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefP
       if (std::isnan(dem.heights_m[pixel])) return;
       const double error = std::fabs(offset_m);
       measure.max_error_m = std::max(measure.max_error_m, error);
-      measure.sum_squares += error * error;
       ++measure.hits;
       if (finer && finer->drawn(pixel)) {
         ++measure.finer_hits;
@@ -76,11 +75,15 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   std::vector<std::uint8_t> used(vertices.size(), 0);
   for (const std::uint32_t v : indices) used[v] = 1;
   bool all_longitudes = false;
+  const auto geocentric = [](double x, double y, double z) { return std::atan2(z, std::hypot(x, y)); };
+  // Per vertex, its geocentric latitude (radians): what every triangle round it takes.
+  std::vector<double> geocentric_lat(vertices.size(), 0.0);
   // Vertices; one at a pole adds no longitude (it has none).
   std::vector<std::size_t> poles;
   for (std::size_t v = 0; v < vertices.size(); ++v) {
     if (!used[v]) continue;
     geodetic[v] = geodeticOf(vertices[v].x, vertices[v].y, vertices[v].z);
+    geocentric_lat[v] = geocentric(vertices[v].x, vertices[v].y, vertices[v].z);
     if (std::fabs(geodetic[v].lat_deg) >= kPoleDeg) {
       poles.push_back(v);
       continue;
@@ -137,9 +140,8 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     // bounded by its geocentric extremes with F at its lowest height (for the latitude away
     // from the equator) or its highest (towards it), N at either end of its range.
     double lowest_c = 1e300, highest_c = -1e300;  // geocentric latitude, radians
-    const auto geocentric = [](double x, double y, double z) { return std::atan2(z, std::hypot(x, y)); };
-    for (const EcefPoint* p : {&a, &b, &c}) {
-      const double lat = geocentric(p->x, p->y, p->z);
+    for (std::size_t k = 0; k < 3; ++k) {
+      const double lat = geocentric_lat[indices[t + k]];
       lowest_c = std::min(lowest_c, lat);
       highest_c = std::max(highest_c, lat);
     }

@@ -59,11 +59,9 @@ class ZoomSurface {
 
 struct DrawnTileMeasure {
   double max_error_m = 0;
-  double sum_squares = 0;  // of the offsets, over the hits
   std::size_t hits = 0;    // pixel and triangle pairs (a pixel on a shared edge counts twice)
   std::size_t finer_hits = 0;  // of those, where the finer zoom is drawn too
   double finer_difference_m = 0;
-  double rmsError() const { return hits ? std::sqrt(sum_squares / static_cast<double>(hits)) : 0.0; }
 };
 
 // Measures a tile's triangles (`indices`, 3 per triangle, into `vertices`: ECEF as decoded,

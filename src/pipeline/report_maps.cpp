@@ -1,7 +1,12 @@
 #include "src/pipeline/report_maps.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "src/pipeline/report_html.h"
@@ -15,21 +20,39 @@ constexpr int kErrorClasses = 10;
 ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition,
                       const TileFrame* frame, std::int32_t zoom, double error_scale_m, const ZoomSurface& surface,
                       int max_side_px) {
-  // Per DEM pixel: the cluster (or face) covering it, and the drawn surface's error.
+  // Per DEM pixel: the cluster (or face) covering it, and the drawn surface's error. A pixel
+  // several faces cover shows the last of them (the largest face index: taken with an atomic
+  // maximum, the same for any thread count).
+  std::vector<std::uint32_t> last_face(dem.pixelCount(), 0);  // face + 1; 0: none
+  const auto& idx = mesh.triangle_indices;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangleCount(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& faces) {
+                      for (std::size_t f = faces.begin(); f < faces.end(); ++f) {
+                        const auto mark = static_cast<std::uint32_t>(f + 1);
+                        forEachCoveredPixel(dem, mesh.vertices[idx[3 * f]], mesh.vertices[idx[3 * f + 1]],
+                                            mesh.vertices[idx[3 * f + 2]], [&](std::size_t pixel, double) {
+                                              std::atomic_ref<std::uint32_t> slot(last_face[pixel]);
+                                              std::uint32_t seen = slot.load(std::memory_order_relaxed);
+                                              while (seen < mark &&
+                                                     !slot.compare_exchange_weak(seen, mark, std::memory_order_relaxed)) {
+                                              }
+                                              return true;
+                                            });
+                      }
+                    });
   std::vector<std::int32_t> cluster(dem.pixelCount(), -1);
   std::vector<float> error(dem.pixelCount(), std::nanf(""));
-  const auto& idx = mesh.triangle_indices;
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    const std::int32_t id = partition ? partition->cluster_of_face[t / 3] : 0;
-    forEachCoveredPixel(dem, mesh.vertices[idx[t]], mesh.vertices[idx[t + 1]], mesh.vertices[idx[t + 2]],
-                        [&](std::size_t pixel, double) {
-                          cluster[pixel] = id;
-                          return true;
-                        });
-  }
-  for (std::size_t pixel = 0; pixel < dem.pixelCount(); ++pixel) {
-    if (surface.drawn(pixel) && !std::isnan(dem.heights_m[pixel])) error[pixel] = static_cast<float>(surface.error(pixel));
-  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, dem.pixelCount(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& pixels) {
+                      for (std::size_t pixel = pixels.begin(); pixel < pixels.end(); ++pixel) {
+                        if (last_face[pixel] > 0) {
+                          cluster[pixel] = partition ? partition->cluster_of_face[last_face[pixel] - 1] : 0;
+                        }
+                        if (surface.drawn(pixel) && !std::isnan(dem.heights_m[pixel])) {
+                          error[pixel] = static_cast<float>(surface.error(pixel));
+                        }
+                      }
+                    });
 
   const int scale = std::max(1, static_cast<int>(std::ceil(static_cast<double>(std::max(dem.width, dem.height)) /
                                                            std::max(16, max_side_px))));
@@ -56,10 +79,10 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
   std::vector<TileKey> tile(map_cluster.size());
   if (frame) {
     const std::vector<std::array<double, 2>> points = frame->toScheme(centres);
-    for (std::size_t i = 0; i < points.size(); ++i) tile[i] = frame->tileAt(points[i], zoom);
+    tbb::parallel_for(std::size_t{0}, points.size(), [&](std::size_t i) { tile[i] = frame->tileAt(points[i], zoom); });
   }
 
-  for (int my = 0; my < height; ++my) {
+  tbb::parallel_for(0, height, [&](int my) {
     for (int mx = 0; mx < width; ++mx) {
       const std::size_t i = static_cast<std::size_t>(my) * width + mx;
       // The largest error in the block.
@@ -82,7 +105,7 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
                                : clusterColour(static_cast<std::uint32_t>(tile[i].x * 7919 + tile[i].y));
       std::copy(c.begin(), c.end(), maps.clusters.at(mx, my));
     }
-  }
+  });
   // Outlines over the colours: cluster borders black, tile outlines white (on top), where a
   // map pixel differs from its right or lower neighbour.
   for (int my = 0; my < height; ++my) {

@@ -1,8 +1,12 @@
 #include "src/pipeline/run_pipeline.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <cmath>
@@ -164,33 +168,65 @@ struct DrawnContent {
   std::vector<std::uint32_t> triangle_indices;
 };
 
+// Marks a level vertex not (yet) in the tile drawnContent is making.
+constexpr std::uint32_t kNotInTile = std::numeric_limits<std::uint32_t>::max();
+
+// local_of: scratch with an entry per level vertex (at least), every entry kNotInTile on entry;
+// left so on return. Vertices take their tile index in order of first appearance in the
+// tile's triangles; one whose snapped point equals an earlier one's is welded to it.
 DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
-                          std::span<const EcefPoint> normals, const DemOnGlobe& globe) {
+                          std::span<const EcefPoint> normals, const DemOnGlobe& globe,
+                          std::vector<std::uint32_t>& local_of) {
   DrawnContent out;
-  std::map<std::uint32_t, std::uint32_t> local_of;  // level vertex -> tile vertex
-  std::map<std::tuple<double, double, double>, std::uint32_t> at_point;
-  std::array<std::uint32_t, 3> corner{};
-  for (std::size_t i = 0; i < tile.triangle_indices.size(); ++i) {
-    const std::uint32_t v = tile.triangle_indices[i];
-    auto [it, inserted] = local_of.try_emplace(v, 0);
-    if (inserted) {
-      const EcefPoint& p = snapped[v];
-      const auto [weld, new_point] = at_point.try_emplace({p.x, p.y, p.z}, static_cast<std::uint32_t>(out.positions.size()));
-      if (new_point) {
-        const GridPoint& g = mesh.vertices[v];
-        out.positions.push_back(p);
-        out.normals.push_back(normals[v]);
-        const bool at_pole = g.row == std::round(g.row) && g.row >= 0 && g.row < globe.dem().height &&
-                             globe.poleRow(static_cast<std::int32_t>(g.row));
-        out.grid.push_back({g.col, g.row, at_pole});
-      }
-      it->second = weld->second;
-    }
-    corner[i % 3] = it->second;
-    if (i % 3 == 2 && corner[0] != corner[1] && corner[1] != corner[2] && corner[2] != corner[0]) {
-      out.triangle_indices.insert(out.triangle_indices.end(), corner.begin(), corner.end());
-    }
+  const auto& idx = tile.triangle_indices;
+  if (local_of.size() < mesh.vertices.size()) local_of.resize(mesh.vertices.size(), kNotInTile);
+  // The level's vertices in order of first appearance (local_of: their place in it).
+  std::vector<std::uint32_t> seen;
+  for (const std::uint32_t v : idx) {
+    if (local_of[v] != kNotInTile) continue;
+    local_of[v] = static_cast<std::uint32_t>(seen.size());
+    seen.push_back(v);
   }
+  // Welds: among vertices whose snapped points are equal (as doubles: -0 is 0), the first seen
+  // keeps its place and the others take it.
+  std::vector<std::uint32_t> order(seen.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
+  const auto point_less = [&](std::uint32_t i, std::uint32_t j) {
+    const EcefPoint& p = snapped[seen[i]];
+    const EcefPoint& q = snapped[seen[j]];
+    return std::tie(p.x, p.y, p.z) < std::tie(q.x, q.y, q.z);
+  };
+  std::stable_sort(order.begin(), order.end(), point_less);
+  std::vector<std::uint32_t> weld_to(seen.size());
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    const bool same_as_previous = k > 0 && !point_less(order[k - 1], order[k]);
+    weld_to[order[k]] = same_as_previous ? weld_to[order[k - 1]] : order[k];
+  }
+  std::vector<std::uint32_t> tile_vertex(seen.size());
+  out.positions.reserve(seen.size());
+  out.normals.reserve(seen.size());
+  out.grid.reserve(seen.size());
+  for (std::size_t i = 0; i < seen.size(); ++i) {
+    if (weld_to[i] != i) {
+      tile_vertex[i] = tile_vertex[weld_to[i]];  // seen earlier
+      continue;
+    }
+    const std::uint32_t v = seen[i];
+    const GridPoint& g = mesh.vertices[v];
+    tile_vertex[i] = static_cast<std::uint32_t>(out.positions.size());
+    out.positions.push_back(snapped[v]);
+    out.normals.push_back(normals[v]);
+    const bool at_pole = g.row == std::round(g.row) && g.row >= 0 && g.row < globe.dem().height &&
+                         globe.poleRow(static_cast<std::int32_t>(g.row));
+    out.grid.push_back({g.col, g.row, at_pole});
+  }
+  out.triangle_indices.reserve(idx.size());
+  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    const std::uint32_t a = tile_vertex[local_of[idx[t]]], b = tile_vertex[local_of[idx[t + 1]]],
+                        c = tile_vertex[local_of[idx[t + 2]]];
+    if (a != b && b != c && c != a) out.triangle_indices.insert(out.triangle_indices.end(), {a, b, c});
+  }
+  for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
   return out;
 }
 
@@ -527,87 +563,129 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   std::size_t total_tiles = 0;
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
   progress.beginStage("writing tiles", total_tiles);
-  std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
   double widest_step_m = 0;
   std::vector<ZoomSummary> zoom_summaries(zoom_count);
   std::vector<ZoomMaps> maps(options.report ? zoom_count : 0);
-  // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
-  // drawn surface (where a viewer draws both), measured on that zoom's surface.
-  ZoomSurface finer_surface;
+  // Per zoom and tile: its drawn content (until both its measure and its encoding are done)
+  // and what is written. Workers write into these pre-sized slots; the files are written from
+  // this thread in a fixed order, so the output is the same for any thread count.
+  struct TileWork {
+    DrawnContent content;
+    std::atomic<int> pending{2};  // the measure and the encoding
+    EncodedTile out;
+    void done() {
+      if (pending.fetch_sub(1) == 1) content = DrawnContent{};
+    }
+  };
+  std::vector<std::vector<std::unique_ptr<TileWork>>> work(zoom_count);
+  std::vector<GlbOptions> zoom_glb(zoom_count, glb);
+  tbb::enumerable_thread_specific<std::vector<std::uint32_t>> content_scratch;
+  // Encodings run in the background (they need no other zoom) while the zooms are measured
+  // one after the other. Declared after everything its tasks use: its destructor waits.
+  tbb::task_group encoding;
+  try {
+    // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
+    // drawn surface (where a viewer draws both), measured on that zoom's surface.
+    ZoomSurface finer_surface;
+    for (std::size_t k = zoom_count; k-- > 0;) {
+      const ZoomContent& level = zooms[k];
+      std::vector<EcefPoint> snapped(level.ecef.size());
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, snapped.size(), 4096),
+                        [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t v = range.begin(); v < range.end(); ++v) {
+                            const double step = vertex_step_m[k][v];
+                            snapped[v] = {snapToStep(level.ecef[v].x, step), snapToStep(level.ecef[v].y, step),
+                                          snapToStep(level.ecef[v].z, step)};
+                          }
+                        });
+      const double largest_step_m =
+          vertex_step_m[k].empty() ? 0.0 : *std::max_element(vertex_step_m[k].begin(), vertex_step_m[k].end());
+      const std::vector<EcefPoint> normals = levelNormals(*level.mesh, level.ecef);
+      zoom_glb[k].position_step_m = zoom_step_m[k];
+      widest_step_m = std::max(widest_step_m, zoom_step_m[k]);
+      // The grid positions measured from are those before the snap: a vertex moves by up to
+      // sqrt(3)/2 of its step.
+      const double shift_m = 0.87 * largest_step_m;
+      ZoomSurface surface(dem.pixelCount());
+      ZoomSummary& zoom_summary = zoom_summaries[k];
+      zoom_summary.position_step_m = zoom_step_m[k];
+      zoom_summary.zoom = level.zoom;
+      zoom_summary.step_pixels = level.step;
+      zoom_summary.clusters = level.clusters;
+      zoom_summary.tiles = level.tiles.size();
+      zoom_summary.vertices = level.mesh->vertices.size();
+      zoom_summary.triangles = level.mesh->triangleCount();
+      for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
+
+      std::vector<std::unique_ptr<TileWork>>& tiles = work[k];
+      tiles.resize(level.tiles.size());
+      tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
+        tiles[i] = std::make_unique<TileWork>();
+        tiles[i]->content = drawnContent(level.tiles[i], *level.mesh, snapped, normals, globe, content_scratch.local());
+      });
+      for (std::size_t i = 0; i < tiles.size(); ++i) {
+        TileWork* tile = tiles[i].get();
+        const GlbOptions* tile_glb = &zoom_glb[k];
+        encoding.run([tile, tile_glb] {
+          tile->out.region = drawnRegion(tile->content.positions, tile->content.triangle_indices);
+          tile->out.vertices = tile->content.positions.size();
+          tile->out.glb = encodeContent(tile->content, *tile_glb, &tile->out.position_bits);
+          tile->done();
+        });
+      }
+      const ZoomSurface* finer = finer_surface.empty() ? nullptr : &finer_surface;
+      tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
+        TileWork& tile = *tiles[i];
+        tile.out.measure = measureDrawnTile(globe, tile.content.positions, tile.content.grid,
+                                            tile.content.triangle_indices, shift_m, finer, &surface);
+        tile.done();
+      });
+      for (const std::unique_ptr<TileWork>& tile : tiles) {
+        zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile->out.measure.max_error_m);
+      }
+      // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
+      double sum_squares = 0;
+      std::size_t drawn_pixels = 0;
+      for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
+        if (!surface.drawn(p)) continue;
+        sum_squares += surface.error(p) * surface.error(p);
+        ++drawn_pixels;
+      }
+      zoom_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
+      if (options.report) {
+        maps[k] = drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, zoom_summary.max_error_m,
+                               surface);
+      }
+      finer_surface = std::move(surface);
+      progress.advance(level.tiles.size());
+    }
+    encoding.wait();
+  } catch (...) {
+    encoding.cancel();
+    encoding.wait();
+    throw;
+  }
+  std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
   for (std::size_t k = zoom_count; k-- > 0;) {
     const ZoomContent& level = zooms[k];
-    std::vector<EcefPoint> snapped(level.ecef.size());
-    double largest_step_m = 0;
-    for (std::size_t v = 0; v < snapped.size(); ++v) {
-      const double step = vertex_step_m[k][v];
-      largest_step_m = std::max(largest_step_m, step);
-      snapped[v] = {snapToStep(level.ecef[v].x, step), snapToStep(level.ecef[v].y, step), snapToStep(level.ecef[v].z, step)};
-    }
-    const std::vector<EcefPoint> normals = levelNormals(*level.mesh, level.ecef);
-    glb.position_step_m = zoom_step_m[k];
-    widest_step_m = std::max(widest_step_m, glb.position_step_m);
-    // The grid positions measured from are those before the snap: a vertex moves by up to
-    // sqrt(3)/2 of its step.
-    const double shift_m = 0.87 * largest_step_m;
-    ZoomSurface surface(dem.pixelCount());
     ZoomSummary& zoom_summary = zoom_summaries[k];
-    zoom_summary.position_step_m = glb.position_step_m;
-    zoom_summary.zoom = level.zoom;
-    zoom_summary.step_pixels = level.step;
-    zoom_summary.clusters = level.clusters;
-    zoom_summary.tiles = level.tiles.size();
-    zoom_summary.vertices = level.mesh->vertices.size();
-    zoom_summary.triangles = level.mesh->triangleCount();
-    for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
-
-    // Encode in parallel batches into pre-sized slots (output identical for any thread
-    // count), write and report progress from this thread.
-    constexpr std::size_t kBatch = 16;
-    for (std::size_t begin = 0; begin < level.tiles.size(); begin += kBatch) {
-      const std::size_t end = std::min(level.tiles.size(), begin + kBatch);
-      std::vector<EncodedTile> encoded(end - begin);
-      tbb::parallel_for(begin, end, [&](std::size_t i) {
-        const DrawnContent content = drawnContent(level.tiles[i], *level.mesh, snapped, normals, globe);
-        EncodedTile& out = encoded[i - begin];
-        out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m,
-                                       finer_surface.empty() ? nullptr : &finer_surface, &surface);
-        out.region = drawnRegion(content.positions, content.triangle_indices);
-        out.vertices = content.positions.size();
-        out.glb = encodeContent(content, glb, &out.position_bits);
-      });
-      for (std::size_t i = begin; i < end; ++i) {
-        const PyramidTile& tile = level.tiles[i];
-        const EncodedTile& tile_out = encoded[i - begin];
-        TileNode node;
-        node.key = tile.key;
-        node.content_uri = contentUri(tile.key, options.implicit_tiling);
-        node.region = tile_out.region;
-        // Measured on the decoded content: against the DEM and against the next finer zoom
-        // where both are drawn; rounded up to the micrometre, what another implementation of
-        // the same measure may differ by in its last bits.
-        node.geometric_error_m =
-            roundUpToMicrometre(std::max(tile_out.measure.max_error_m, tile_out.measure.finer_difference_m));
-        zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile_out.measure.max_error_m);
-        zoom_summary.bytes += output.writeFile(node.content_uri, tile_out.glb);
-        zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile_out.position_bits);
-        nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
-        progress.advance();
-      }
+    for (std::size_t i = 0; i < level.tiles.size(); ++i) {
+      const PyramidTile& tile = level.tiles[i];
+      const EncodedTile& tile_out = work[k][i]->out;
+      TileNode node;
+      node.key = tile.key;
+      node.content_uri = contentUri(tile.key, options.implicit_tiling);
+      node.region = tile_out.region;
+      // Measured on the decoded content: against the DEM and against the next finer zoom
+      // where both are drawn; rounded up to the micrometre, what another implementation of
+      // the same measure may differ by in its last bits.
+      node.geometric_error_m =
+          roundUpToMicrometre(std::max(tile_out.measure.max_error_m, tile_out.measure.finer_difference_m));
+      zoom_summary.bytes += output.writeFile(node.content_uri, tile_out.glb);
+      zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile_out.position_bits);
+      nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
     }
-    // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
-    double sum_squares = 0;
-    std::size_t drawn_pixels = 0;
-    for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
-      if (!surface.drawn(p)) continue;
-      sum_squares += surface.error(p) * surface.error(p);
-      ++drawn_pixels;
-    }
-    zoom_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
-    if (options.report) {
-      maps[k] = drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, zoom_summary.max_error_m,
-                             surface);
-    }
-    finer_surface = std::move(surface);
+    work[k].clear();
   }
   progress.endStage();
   for (const ZoomSummary& zoom_summary : zoom_summaries) {

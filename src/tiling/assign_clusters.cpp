@@ -1,5 +1,7 @@
 #include "src/tiling/assign_clusters.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -109,17 +111,34 @@ FaceTiles faceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vect
                     std::int32_t zoom) {
   const std::size_t face_count = mesh.triangleCount();
   const auto& idx = mesh.triangle_indices;
+  // In parallel blocks of faces (the scheme's functions are pure), joined in face order.
+  constexpr std::size_t kBlock = 4096;
+  const std::size_t blocks = (face_count + kBlock - 1) / kBlock;
+  std::vector<FaceTiles> parts(blocks);
+  tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
+    FaceTiles& part = parts[b];
+    const std::size_t first = b * kBlock, last = std::min(face_count, first + kBlock);
+    part.offset.reserve(last - first);
+    part.tiles.reserve((last - first) + (last - first) / 4);
+    for (std::size_t f = first; f < last; ++f) {
+      TileBounds box{1e300, 1e300, -1e300, -1e300};
+      for (std::size_t k = 0; k < 3; ++k) {
+        const auto& p = scheme[idx[3 * f + k]];
+        box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+      }
+      for (const TileKey& key : frame.tilesIntersecting(box, zoom)) part.tiles.push_back(key);
+      part.offset.push_back(part.tiles.size());  // this face's end within the block
+    }
+  });
   FaceTiles out;
   out.offset.assign(face_count + 1, 0);
-  out.tiles.reserve(face_count + face_count / 4);
-  for (std::size_t f = 0; f < face_count; ++f) {
-    TileBounds box{1e300, 1e300, -1e300, -1e300};
-    for (std::size_t k = 0; k < 3; ++k) {
-      const auto& p = scheme[idx[3 * f + k]];
-      box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
-    }
-    for (const TileKey& key : frame.tilesIntersecting(box, zoom)) out.tiles.push_back(key);
-    out.offset[f + 1] = out.tiles.size();
+  std::size_t total = 0;
+  for (const FaceTiles& part : parts) total += part.tiles.size();
+  out.tiles.reserve(total);
+  for (std::size_t b = 0; b < blocks; ++b) {
+    const std::size_t base = out.tiles.size();
+    for (std::size_t i = 0; i < parts[b].offset.size(); ++i) out.offset[b * kBlock + i + 1] = base + parts[b].offset[i];
+    out.tiles.insert(out.tiles.end(), parts[b].tiles.begin(), parts[b].tiles.end());
   }
   return out;
 }

@@ -78,11 +78,12 @@ void checkWebMercatorLatitude(std::string_view place, double lon_deg, double lat
   }
 }
 
-// Checks a point of a web scheme: finite, and a latitude inside the scheme.
+// Checks a point of a web scheme: finite, and a latitude inside the scheme. (The message's
+// place is only made for a point that fails: this runs for every face of every level.)
 void checkWebPoint(TileSchemeKind kind, double lon_deg, double lat_deg) {
-  checkFiniteLonLat(where(kind), lon_deg, lat_deg);
+  if (!std::isfinite(lon_deg) || !std::isfinite(lat_deg)) checkFiniteLonLat(where(kind), lon_deg, lat_deg);
   if (kind == TileSchemeKind::WebMercator) {
-    checkWebMercatorLatitude(where(kind), lon_deg, lat_deg);
+    if (std::abs(lat_deg) > kWebMercatorMaxLatitudeDeg) checkWebMercatorLatitude(where(kind), lon_deg, lat_deg);
   } else if (std::abs(lat_deg) > 90.0) {
     throw Error(ErrorCode::Input, where(kind) + ": latitude " + formatNumber(lat_deg) +
                                       " deg (at lon " + formatNumber(lon_deg) +
