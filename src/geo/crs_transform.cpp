@@ -170,11 +170,13 @@ void CrsToWgs84::transform(std::span<const CrsPoint> in, std::span<GeodeticPoint
     lv95ToWgs84(in, out);
     return;
   }
-  constexpr std::size_t kBatch = 65536;
-  std::vector<double> x(kBatch), y(kBatch), z(kBatch);
-  std::vector<int> success(kBatch);
-  for (std::size_t begin = 0; begin < in.size(); begin += kBatch) {
-    const std::size_t count = std::min(kBatch, in.size() - begin);
+  // Batches of at most 65536 points; a short call (one vertex a collapse moves) allocates only
+  // what it needs.
+  const std::size_t batch = std::min<std::size_t>(65536, in.size());
+  std::vector<double> x(batch), y(batch), z(batch);
+  std::vector<int> success(batch);
+  for (std::size_t begin = 0; begin < in.size(); begin += batch) {
+    const std::size_t count = std::min(batch, in.size() - begin);
     for (std::size_t i = 0; i < count; ++i) {
       x[i] = in[begin + i].x;
       y[i] = in[begin + i].y;

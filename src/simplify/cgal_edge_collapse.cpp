@@ -14,8 +14,10 @@
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -203,17 +205,10 @@ class TerrainQuadrics {
   boost::optional<Point3> operator()(const Profile& profile) const {
     const Quadric q = combined(profile);
     auto valid = [&](const Point3& p) { return keepsHeightField(*state_, profile, placedGrid(*state_, profile, p)); };
-    // Optimum: solve A x = -b with A the upper 3x3 block, by Cramer's rule.
-    const double a00 = q[0], a01 = q[1], a02 = q[2], a11 = q[4], a12 = q[5], a22 = q[7];
-    const double b0 = -q[3], b1 = -q[6], b2 = -q[8];
-    const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
-    const double det = a00 * c00 + a01 * c01 + a02 * c02;
-    const double trace = a00 + a11 + a22;
-    if (std::fabs(det) > 1e-12 * trace * trace * trace) {
-      const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-      const Point3 optimum((c00 * b0 + c01 * b1 + c02 * b2) / det, (c01 * b0 + c11 * b1 + c12 * b2) / det,
-                           (c02 * b0 + c12 * b1 + c22 * b2) / det);
-      if (valid(optimum)) return optimum;
+    std::array<double, 3> optimum;
+    if (quadricMinimum(q, optimum)) {
+      const Point3 point(optimum[0], optimum[1], optimum[2]);
+      if (valid(point)) return point;
     }
     // On the segment p0 + t (p1 - p0), as CGAL's construct_optimal_point_singular.
     const Point3& p0 = profile.p0();
@@ -223,18 +218,9 @@ class TerrainQuadrics {
     const Point3& cheaper = cost0 > cost1 ? p1 : p0;
     const Point3& dearer = cost0 > cost1 ? p0 : p1;
     const auto d = p1 - p0;
-    const double qa = q[0] * d.x() * d.x() + 2 * q[1] * d.x() * d.y() + 2 * q[2] * d.x() * d.z() +
-                      q[4] * d.y() * d.y() + 2 * q[5] * d.y() * d.z() + q[7] * d.z() * d.z();  // (d, 0)^T Q (d, 0)
-    const double qb = 2 * (q[0] * p0.x() * d.x() + q[1] * (p0.x() * d.y() + p0.y() * d.x()) +
-                           q[2] * (p0.x() * d.z() + p0.z() * d.x()) + q[4] * p0.y() * d.y() +
-                           q[5] * (p0.y() * d.z() + p0.z() * d.y()) + q[7] * p0.z() * d.z() +
-                           q[3] * d.x() + q[6] * d.y() + q[8] * d.z());  // 2 (p0, 1)^T Q (d, 0)
-    if (qa > 0) {
-      const double t = -qb / (2 * qa);
-      if (t > 0 && t < 1) {
-        const Point3 on_edge = p0 + t * d;
-        if (valid(on_edge)) return on_edge;
-      }
+    if (const std::optional<double> t = segmentMinimum(q, {p0.x(), p0.y(), p0.z()}, {d.x(), d.y(), d.z()})) {
+      const Point3 on_edge = p0 + *t * d;
+      if (valid(on_edge)) return on_edge;
     }
     if (valid(cheaper)) return cheaper;
     if (valid(dearer)) return dearer;

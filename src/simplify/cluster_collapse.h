@@ -9,6 +9,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -76,6 +77,16 @@ inline double evaluate(const Quadric& q, double x, double y, double z) {
   return q[0] * x * x + 2 * q[1] * x * y + 2 * q[2] * x * z + 2 * q[3] * x + q[4] * y * y +
          2 * q[5] * y * z + 2 * q[6] * y + q[7] * z * z + 2 * q[8] * z + q[9];
 }
+
+// Where the quadric is least (Garland and Heckbert's optimal placement): A x = -b with A its
+// upper 3x3 block, by Cramer's rule. False when the system is ill-conditioned (|det| at most
+// 1e-12 trace^3), where the optimum would run far away over nearly flat ground.
+bool quadricMinimum(const Quadric& q, std::array<double, 3>& point);
+
+// Where the quadric is least along p0 + t d (CGAL's construct_optimal_point_singular): t when
+// the quadric curves upward along d and t lies strictly inside (0, 1); nullopt otherwise.
+std::optional<double> segmentMinimum(const Quadric& q, const std::array<double, 3>& p0,
+                                     const std::array<double, 3>& d);
 
 // Counter-clockwise seen from above and not degenerate: twice the area in (col, row) above
 // 1e-9 times the longest edge squared, so the sign is stable under rounding whatever vertex a

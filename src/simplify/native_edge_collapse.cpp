@@ -9,6 +9,7 @@
 #include <functional>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <utility>
 
 #include "src/geo/dem_on_globe.h"
@@ -176,71 +177,52 @@ class ClusterCollapser {
             g.height_m - origin_.height_m};
   }
 
-  double cost(std::uint32_t u, std::uint32_t v) const {
+  Quadric combined(std::uint32_t u, std::uint32_t v) const {
     Quadric sum = a_.quadric[u];
     addTo(sum, a_.quadric[v]);
+    return sum;
+  }
+
+  // u -> v, v staying where it is.
+  double cost(std::uint32_t u, std::uint32_t v) const {
     const auto& p = a_.metres[v];
-    return std::max(0.0, evaluate(sum, p[0], p[1], p[2]));
+    return std::max(0.0, evaluate(combined(u, v), p[0], p[1], p[2]));
+  }
+
+  // u -> v with v moved to g, at the cost of the edge's quadric q there.
+  Collapse movedTo(const Quadric& q, std::uint32_t v, const GridPoint& g) const {
+    const auto m = metresOf(g);
+    return {std::max(0.0, evaluate(q, m[0], m[1], m[2])), v, true, g};
   }
 
   // Both ends free: the point of segment uv where the edge's quadric is least (CGAL's
   // fallback placement when the optimum is unusable), strictly between the ends; none
-  // otherwise.
+  // (moves false) otherwise.
   Collapse segmentOptimum(std::uint32_t u, std::uint32_t v) const {
-    Collapse best;
-    Quadric q = a_.quadric[u];
-    addTo(q, a_.quadric[v]);
+    const Quadric q = combined(u, v);
     const auto& p0 = a_.metres[v];
     const auto& p1 = a_.metres[u];
-    const double d[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-    const double qa = q[0] * d[0] * d[0] + 2 * q[1] * d[0] * d[1] + 2 * q[2] * d[0] * d[2] + q[4] * d[1] * d[1] +
-                      2 * q[5] * d[1] * d[2] + q[7] * d[2] * d[2];
-    const double qb = 2 * (q[0] * p0[0] * d[0] + q[1] * (p0[0] * d[1] + p0[1] * d[0]) +
-                           q[2] * (p0[0] * d[2] + p0[2] * d[0]) + q[4] * p0[1] * d[1] +
-                           q[5] * (p0[1] * d[2] + p0[2] * d[1]) + q[7] * p0[2] * d[2] + q[3] * d[0] +
-                           q[6] * d[1] + q[8] * d[2]);
-    if (!(qa > 0)) return best;
-    const double t = -qb / (2 * qa);
-    if (!(t > 0 && t < 1)) return best;
+    const std::optional<double> t = segmentMinimum(q, p0, {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]});
+    if (!t) return {};
     const GridPoint& g0 = a_.grid[v];
     const GridPoint& g1 = a_.grid[u];
-    const GridPoint g{g0.col + t * (g1.col - g0.col), g0.row + t * (g1.row - g0.row),
-                      g0.height_m + t * (g1.height_m - g0.height_m)};
-    const auto m = metresOf(g);
-    best.cost = std::max(0.0, evaluate(q, m[0], m[1], m[2]));
-    best.v = v;
-    best.moves = true;
-    best.placed = g;
-    return best;
+    return movedTo(q, v, {g0.col + *t * (g1.col - g0.col), g0.row + *t * (g1.row - g0.row),
+                          g0.height_m + *t * (g1.height_m - g0.height_m)});
   }
 
   // Both ends free: the edge's quadric optimum (CGAL's Garland-Heckbert placement) with its
   // cost; none (moves false) when the 3x3 system is ill-conditioned or the optimum is an end.
   Collapse quadricOptimum(std::uint32_t u, std::uint32_t v) const {
-    Collapse best;
-    Quadric q = a_.quadric[u];
-    addTo(q, a_.quadric[v]);
-    const double a00 = q[0], a01 = q[1], a02 = q[2], a11 = q[4], a12 = q[5], a22 = q[7];
-    const double b0 = -q[3], b1 = -q[6], b2 = -q[8];
-    const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
-    const double det = a00 * c00 + a01 * c01 + a02 * c02;
-    const double trace = a00 + a11 + a22;
-    if (!(std::fabs(det) > 1e-12 * trace * trace * trace)) return best;
-    const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-    const double x = (c00 * b0 + c01 * b1 + c02 * b2) / det, y = (c01 * b0 + c11 * b1 + c12 * b2) / det,
-                 z = (c02 * b0 + c12 * b1 + c22 * b2) / det;
-    const GridPoint g{x / options_.metres_per_col + origin_.col, -y / options_.metres_per_row + origin_.row,
-                      z + origin_.height_m};
-    if (!(std::isfinite(g.col) && std::isfinite(g.row) && std::isfinite(g.height_m))) return best;
+    const Quadric q = combined(u, v);
+    std::array<double, 3> optimum;
+    if (!quadricMinimum(q, optimum)) return {};
+    const GridPoint g{optimum[0] / options_.metres_per_col + origin_.col,
+                      -optimum[1] / options_.metres_per_row + origin_.row, optimum[2] + origin_.height_m};
+    if (!(std::isfinite(g.col) && std::isfinite(g.row) && std::isfinite(g.height_m))) return {};
     for (const std::uint32_t end : {u, v}) {
-      if (a_.grid[end].col == g.col && a_.grid[end].row == g.row && a_.grid[end].height_m == g.height_m) return best;
+      if (a_.grid[end].col == g.col && a_.grid[end].row == g.row && a_.grid[end].height_m == g.height_m) return {};
     }
-    const auto p = metresOf(g);
-    best.cost = std::max(0.0, evaluate(q, p[0], p[1], p[2]));
-    best.v = v;
-    best.moves = true;
-    best.placed = g;
-    return best;
+    return movedTo(q, v, g);
   }
 
   // The vertex after u in triangle t (u's ring, counter-clockwise).

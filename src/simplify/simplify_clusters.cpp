@@ -172,6 +172,34 @@ double slopeOf(const GridPoint& a, const GridPoint& b, const GridPoint& c, doubl
   const double dz1 = b.height_m - a.height_m, dz2 = c.height_m - a.height_m;
   return std::hypot((dz1 * vy - dz2 * uy) / det, (dz2 * ux - dz1 * vx) / det);
 }
+
+bool quadricMinimum(const Quadric& q, std::array<double, 3>& point) {
+  const double a00 = q[0], a01 = q[1], a02 = q[2], a11 = q[4], a12 = q[5], a22 = q[7];
+  const double b0 = -q[3], b1 = -q[6], b2 = -q[8];
+  const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+  const double det = a00 * c00 + a01 * c01 + a02 * c02;
+  const double trace = a00 + a11 + a22;
+  if (!(std::fabs(det) > 1e-12 * trace * trace * trace)) return false;
+  const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+  point = {(c00 * b0 + c01 * b1 + c02 * b2) / det, (c01 * b0 + c11 * b1 + c12 * b2) / det,
+           (c02 * b0 + c12 * b1 + c22 * b2) / det};
+  return true;
+}
+
+std::optional<double> segmentMinimum(const Quadric& q, const std::array<double, 3>& p0,
+                                     const std::array<double, 3>& d) {
+  const double qa = q[0] * d[0] * d[0] + 2 * q[1] * d[0] * d[1] + 2 * q[2] * d[0] * d[2] + q[4] * d[1] * d[1] +
+                    2 * q[5] * d[1] * d[2] + q[7] * d[2] * d[2];  // (d, 0)^T Q (d, 0)
+  const double qb = 2 * (q[0] * p0[0] * d[0] + q[1] * (p0[0] * d[1] + p0[1] * d[0]) +
+                         q[2] * (p0[0] * d[2] + p0[2] * d[0]) + q[4] * p0[1] * d[1] +
+                         q[5] * (p0[1] * d[2] + p0[2] * d[1]) + q[7] * p0[2] * d[2] + q[3] * d[0] +
+                         q[6] * d[1] + q[8] * d[2]);  // 2 (p0, 1)^T Q (d, 0)
+  if (!(qa > 0)) return std::nullopt;
+  const double t = -qb / (2 * qa);
+  if (!(t > 0 && t < 1)) return std::nullopt;
+  return t;
+}
+
 }  // namespace cluster_collapse
 
 ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
