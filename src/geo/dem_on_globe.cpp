@@ -4,6 +4,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -86,6 +87,7 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
       pole_rows_[static_cast<std::size_t>(row)] = at_pole ? 1 : 0;
     }
   });
+  has_pole_rows_ = std::find(pole_rows_.begin(), pole_rows_.end(), 1) != pole_rows_.end();
   // Spacing of neighbouring points, without their heights (the part along the vertical).
   const auto horizontal = [&](std::size_t i, std::size_t j) {
     const EcefPoint p = point(i), q = point(j);
@@ -96,14 +98,17 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
   };
   column_spacing_m_.assign(static_cast<std::size_t>(dem.height), 0.0);
   row_spacing_m_.assign(static_cast<std::size_t>(dem.height), 0.0);
+  max_sin_latitude_.assign(static_cast<std::size_t>(dem.height), 0.0);
   tbb::parallel_for(std::int32_t{0}, dem.height, [&](std::int32_t row) {
-    double columns = dem.width > 1 ? 1e300 : 0.0, rows = row + 1 < dem.height ? 1e300 : 0.0;
+    double columns = dem.width > 1 ? 1e300 : 0.0, rows = row + 1 < dem.height ? 1e300 : 0.0, sin_latitude = 0;
     for (std::int32_t col = 0; col < dem.width; ++col) {
+      sin_latitude = std::max(sin_latitude, std::fabs(up_z_[dem.index(col, row)]));
       if (col + 1 < dem.width) columns = std::min(columns, horizontal(dem.index(col, row), dem.index(col + 1, row)));
       if (row + 1 < dem.height) rows = std::min(rows, horizontal(dem.index(col, row), dem.index(col, row + 1)));
     }
     column_spacing_m_[static_cast<std::size_t>(row)] = pole_rows_[static_cast<std::size_t>(row)] ? 0.0 : columns;
     row_spacing_m_[static_cast<std::size_t>(row)] = rows;
+    max_sin_latitude_[static_cast<std::size_t>(row)] = pole_rows_[static_cast<std::size_t>(row)] ? 0.0 : sin_latitude;
   });
   if (dem.width > 2) {
     const std::int32_t middle = dem.height / 2;

@@ -60,11 +60,16 @@ class DemOnGlobe {
   // the TIN and the simplifier measure them in the grid, the tiles and `terratiles check` as
   // drawn (where verticals meet triangles: at the pole, the pole vertex).
   bool poleRow(std::int32_t row) const { return pole_rows_[static_cast<std::size_t>(row)] != 0; }
+  // Whether any row is a pole row.
+  bool hasPoleRows() const { return has_pole_rows_; }
   // The smallest ground distance between neighbouring pixels' points along row `row`
   // (between columns; 0 on a pole row) and between rows `row` and `row` + 1, metres
   // (horizontal, heights left out).
   double columnSpacing(std::int32_t row) const { return column_spacing_m_[static_cast<std::size_t>(row)]; }
   double rowSpacing(std::int32_t row) const { return row_spacing_m_[static_cast<std::size_t>(row)]; }
+  // The largest |sin latitude| of the verticals of row `row`'s pixels (0 on a pole row, whose
+  // pixels have no column to stray by).
+  double maxSinLatitude(std::int32_t row) const { return max_sin_latitude_[static_cast<std::size_t>(row)]; }
   // Whether the DEM spans the whole circle of longitude (its last column is next to its first).
   bool wrapsLongitude() const { return wraps_longitude_; }
   // The same as arrays (structure of arrays, for vectorised scans).
@@ -95,8 +100,9 @@ class DemOnGlobe {
   std::vector<double> x_, y_, z_;
   std::vector<double> up_x_, up_y_, up_z_;
   std::vector<std::uint8_t> pole_rows_;
-  std::vector<double> column_spacing_m_, row_spacing_m_;
+  std::vector<double> column_spacing_m_, row_spacing_m_, max_sin_latitude_;
   bool wraps_longitude_ = false;
+  bool has_pole_rows_ = false;
 };
 
 // The WGS84 ellipsoid normal at a geodetic position.

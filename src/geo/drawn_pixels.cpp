@@ -11,28 +11,25 @@ PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>
   const DemGrid& dem = globe.dem();
   constexpr double kRadius_m = 6.3e6;  // below every WGS84 radius of curvature
   double row_min = 1e300, row_max = -1e300;
-  // tan of the latitude of the corner nearest a pole, from the verticals of the pixels at the
-  // corners (sin lat is the vertical's z).
-  double sin_lat = 0;
   for (const GridCorner& corner : corners) {
     row_min = std::min(row_min, corner.row);
     row_max = std::max(row_max, corner.row);
-    if (corner.at_pole) continue;
-    const auto col = static_cast<std::int32_t>(std::clamp(std::round(corner.col), 0.0, dem.width - 1.0));
-    const auto row = static_cast<std::int32_t>(std::clamp(std::round(corner.row), 0.0, dem.height - 1.0));
-    sin_lat = std::max(sin_lat, std::fabs(globe.up(dem.index(col, row))[2]));
+  }
+  // Over the rows the footprint can span: the smallest spacings, and the largest |sin lat| of
+  // their verticals (a pole row has none: a corner there has no column to stray by), which
+  // bounds that of every corner.
+  const auto first_row = static_cast<std::int32_t>(std::clamp(std::floor(row_min) - 1, 0.0, dem.height - 1.0));
+  const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
+  double row_spacing = std::numeric_limits<double>::infinity(), column_spacing = row_spacing;
+  double sin_lat = 0;
+  for (std::int32_t row = first_row; row <= last_row; ++row) {
+    if (row < dem.height - 1) row_spacing = std::min(row_spacing, globe.rowSpacing(row));
+    if (!globe.poleRow(row)) column_spacing = std::min(column_spacing, globe.columnSpacing(row));
+    sin_lat = std::max(sin_lat, globe.maxSinLatitude(row));
   }
   const double tan_lat = std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
   const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
   const double margin_m = bulge_m + shift_m;
-  // Over the smallest spacings of the rows the footprint can span.
-  const auto first_row = static_cast<std::int32_t>(std::clamp(std::floor(row_min) - 1, 0.0, dem.height - 1.0));
-  const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
-  double row_spacing = std::numeric_limits<double>::infinity(), column_spacing = row_spacing;
-  for (std::int32_t row = first_row; row <= last_row; ++row) {
-    if (row < dem.height - 1) row_spacing = std::min(row_spacing, globe.rowSpacing(row));
-    if (!globe.poleRow(row)) column_spacing = std::min(column_spacing, globe.columnSpacing(row));
-  }
   PixelMargin margin;
   margin.rows = row_spacing > 0 ? margin_m / row_spacing : static_cast<double>(dem.height);
   margin.columns = column_spacing > 0 && std::isfinite(column_spacing) ? margin_m / column_spacing

@@ -259,8 +259,8 @@ class TerrainFilter {
       return {};
     }
     const bool walls = !allNewTriangles(profile, [&](VertexIndex a, VertexIndex c) {
-      return slopeOf(state_->grid[a], placed, state_->grid[c], state_->options->metres_per_col,
-                     state_->options->metres_per_row) <= kMaxSlope;
+      return !isSteeperThan(state_->grid[a], placed, state_->grid[c], state_->options->metres_per_col,
+                            state_->options->metres_per_row, kMaxSlope);
     });
     if (walls) {
       ++state_->refused_for_flip;

@@ -99,9 +99,11 @@ bool isUpwardTriangle(const GridPoint& a, const GridPoint& b, const GridPoint& c
 // jump as large as the wall.
 inline constexpr double kMaxSlope = 100;
 
-// Rise over run of the triangle in metres (infinity when it is vertical or degenerate).
-double slopeOf(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
-               double metres_per_row);
+// Whether the triangle rises more than max_slope (rise over run in metres) anywhere, or is
+// vertical or degenerate: its gradient's squared length against max_slope^2, without a root or
+// a division.
+bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
+                   double metres_per_row, double max_slope);
 
 // True when some valid DEM pixel the triangle covers is more than budget_m away from it: the
 // pixel inclusion and measure of measureTin (in the grid frame, or on the globe with the

@@ -65,15 +65,13 @@ struct ClusterArrays {
   // (kNone ends a chain, `absorbed_last` is its last link).
   std::vector<std::uint32_t> star_start, star, star_fill;
   std::vector<std::uint32_t> absorbed_next, absorbed_last;
-  // The queue: (cheapest collapse, vertex, stamp); an entry whose stamp is not the vertex's
-  // latest is stale.
-  struct Entry {
-    double cost;
-    std::uint32_t u, stamp;
-    bool operator>(const Entry& other) const { return cost != other.cost ? cost > other.cost : u > other.u; }
-  };
-  std::vector<Entry> queue;
-  std::vector<std::uint32_t> stamp;
+  // Per local vertex: its cheapest collapse (the queue's key is its cost; v = kNone: none
+  // known), kept so that a collapse next to it recomputes only the collapses it changes, and
+  // tried first when the vertex comes out of the queue.
+  std::vector<Collapse> best;
+  // The queue: a binary heap of free vertices by (best_cost, vertex), and each vertex's place
+  // in it (kNone: not queued).
+  std::vector<std::uint32_t> heap, heap_place;
   std::vector<std::uint32_t> u_triangles, u_ring, v_triangles, v_ring, around;
   std::vector<Collapse> targets;  // the collapses of the vertex under way
 };
@@ -263,22 +261,107 @@ class ClusterCollapser {
     }
   }
 
-  // Queues u (free, not removed) at its cheapest collapse, superseding its earlier entries.
+  // The queue's order: cheapest collapse first, ties by vertex.
+  bool before(std::uint32_t p, std::uint32_t q) const {
+    return a_.best[p].cost != a_.best[q].cost ? a_.best[p].cost < a_.best[q].cost : p < q;
+  }
+  void heapSet(std::size_t place, std::uint32_t u) {
+    a_.heap[place] = u;
+    a_.heap_place[u] = static_cast<std::uint32_t>(place);
+  }
+  void siftUp(std::size_t place) {
+    const std::uint32_t u = a_.heap[place];
+    while (place > 0) {
+      const std::size_t parent = (place - 1) / 2;
+      if (!before(u, a_.heap[parent])) break;
+      heapSet(place, a_.heap[parent]);
+      place = parent;
+    }
+    heapSet(place, u);
+  }
+  void siftDown(std::size_t place) {
+    const std::uint32_t u = a_.heap[place];
+    const std::size_t size = a_.heap.size();
+    for (;;) {
+      std::size_t child = 2 * place + 1;
+      if (child >= size) break;
+      if (child + 1 < size && before(a_.heap[child + 1], a_.heap[child])) ++child;
+      if (!before(a_.heap[child], u)) break;
+      heapSet(place, a_.heap[child]);
+      place = child;
+    }
+    heapSet(place, u);
+  }
+  // u's cheapest collapse changed: (re)place it in the queue.
+  void queueAt(std::uint32_t u, const Collapse& cheapest) {
+    const double old = a_.best[u].cost;
+    a_.best[u] = cheapest;
+    const std::uint32_t place = a_.heap_place[u];
+    if (place == kNone) {
+      a_.heap.push_back(u);
+      siftUp(a_.heap.size() - 1);
+    } else if (cheapest.cost <= old) {
+      siftUp(place);
+    } else {
+      siftDown(place);
+    }
+  }
+  std::uint32_t popCheapest() {
+    const std::uint32_t u = a_.heap.front();
+    a_.heap_place[u] = kNone;
+    const std::uint32_t last = a_.heap.back();
+    a_.heap.pop_back();
+    if (!a_.heap.empty()) {
+      a_.heap[0] = last;
+      siftDown(0);
+    }
+    return u;
+  }
+
+  // Every collapse of u into its neighbour v, passed to add: u -> v (v stays where it is),
+  // and with v free too, v moved to the edge's quadric optimum and to the best point of the
+  // segment uv (when they exist).
+  template <typename Add>
+  void collapsesInto(std::uint32_t u, std::uint32_t v, Add&& add) const {
+    add(Collapse{cost(u, v), v, false, a_.grid[v]});
+    if (a_.locked[v]) return;
+    const Collapse moved = quadricOptimum(u, v);
+    if (moved.moves) add(moved);
+    const Collapse on_edge = segmentOptimum(u, v);
+    if (on_edge.moves) add(on_edge);
+  }
+
+  // Queues u (free, not removed) at its cheapest collapse, superseding its earlier place.
   void enqueue(std::uint32_t u) {
     if (a_.locked[u] || a_.removed[u]) return;
     gatherStar(u, a_.u_triangles, a_.u_ring);
-    double best = std::numeric_limits<double>::infinity();
+    Collapse cheapest;
+    cheapest.cost = std::numeric_limits<double>::infinity();
     for (const std::uint32_t v : a_.u_ring) {
-      best = std::min(best, cost(u, v));
-      if (!a_.locked[v]) {
-        const Collapse moved = quadricOptimum(u, v);
-        if (moved.moves) best = std::min(best, moved.cost);
-      }
+      collapsesInto(u, v, [&](const Collapse& c) {
+        if (c < cheapest) cheapest = c;
+      });
     }
-    ++a_.stamp[u];
-    if (!std::isfinite(best)) return;
-    a_.queue.push_back({best, u, a_.stamp[u]});
-    std::push_heap(a_.queue.begin(), a_.queue.end(), std::greater<>());
+    if (cheapest.v == kNone) return;
+    queueAt(u, cheapest);
+  }
+
+  // w was next to u or v when u collapsed into v: only its collapses into v changed (and
+  // those into u are gone), so unless its cheapest went to u or v, the new cheapest is the
+  // cheaper of that and its collapses into v now. Queued again in any case (a vertex the
+  // filter refused comes back when its star changes).
+  void requeueNextTo(std::uint32_t w, std::uint32_t u, std::uint32_t v) {
+    if (a_.locked[w] || a_.removed[w]) return;
+    const std::uint32_t target = a_.best[w].v;
+    if (target == kNone || target == u || target == v) {
+      enqueue(w);
+      return;
+    }
+    Collapse cheapest = a_.best[w];
+    collapsesInto(w, v, [&](const Collapse& c) {
+      if (c < cheapest) cheapest = c;
+    });
+    queueAt(w, cheapest);
   }
 
   // Greedy, as CGAL's edge_collapse: always the cheapest queued vertex next; a vertex the
@@ -290,54 +373,53 @@ class ClusterCollapser {
     a_.absorbed_last.resize(vertices);
     for (std::uint32_t v = 0; v < vertices; ++v) a_.absorbed_last[v] = v;
     a_.removed.assign(vertices, 0);
-    a_.stamp.assign(vertices, 0);
-    a_.queue.clear();
+    a_.best.assign(vertices, Collapse{});
+    a_.heap.clear();
+    a_.heap_place.assign(vertices, kNone);
     for (std::uint32_t u = 0; u < vertices; ++u) {
       if (a_.star_start[u] != a_.star_start[u + 1]) enqueue(u);
     }
-    while (wantsMore() && !a_.queue.empty()) {
-      std::pop_heap(a_.queue.begin(), a_.queue.end(), std::greater<>());
-      const ClusterArrays::Entry entry = a_.queue.back();
-      a_.queue.pop_back();
-      if (entry.stamp != a_.stamp[entry.u] || a_.removed[entry.u]) continue;
-      tryCollapse(entry.u, out);
-    }
+    while (wantsMore() && !a_.heap.empty()) tryCollapse(popCheapest(), out);
   }
 
-  // Tries u's collapses from the cheapest; applies the first the filter accepts.
+  // Tries u's collapses from the cheapest (the one it was queued at, then the others in order);
+  // applies the first the filter accepts.
   bool tryCollapse(std::uint32_t u, ClusterOutput& out) {
     gatherStar(u, a_.u_triangles, a_.u_ring);
+    const Collapse first = a_.best[u];
+    if (accepts(u, first, out)) return true;
     a_.targets.clear();
     for (const std::uint32_t v : a_.u_ring) {
-      a_.targets.push_back({cost(u, v), v, false, a_.grid[v]});
-      if (!a_.locked[v]) {
-        const Collapse moved = quadricOptimum(u, v);
-        if (moved.moves) a_.targets.push_back(moved);
-        const Collapse on_edge = segmentOptimum(u, v);
-        if (on_edge.moves) a_.targets.push_back(on_edge);
-      }
+      collapsesInto(u, v, [&](const Collapse& c) {
+        if (first < c || c < first) a_.targets.push_back(c);
+      });
     }
     std::sort(a_.targets.begin(), a_.targets.end());
     for (const Collapse& collapse : a_.targets) {
-      const std::uint32_t v = collapse.v;
-      gatherStar(v, a_.v_triangles, a_.v_ring);
-      const GridPoint& placed = collapse.placed;
-      if (!linkIsTwoVertices(u) || !keepsHeightField(u, v, collapse.moves, placed)) {
-        ++out.refused_for_flip;
-        continue;
-      }
-      // A moved vertex is placed on the globe exactly as the pipeline will place it.
-      const EcefPoint placed_ecef = !options_.globe ? EcefPoint{}
-                                    : collapse.moves ? options_.globe->place(placed)
-                                                     : a_.ecef[v];
-      if (std::isfinite(options_.max_error_m) && !withinBudget(u, v, collapse.moves, placed, placed_ecef)) {
-        ++out.refused_for_error;
-        continue;
-      }
-      apply(u, v, collapse.moves, placed, placed_ecef);
-      return true;
+      if (accepts(u, collapse, out)) return true;
     }
     return false;  // not queued again until a collapse changes its star
+  }
+
+  // Applies the collapse of u when the filter accepts it. Needs u's star gathered.
+  bool accepts(std::uint32_t u, const Collapse& collapse, ClusterOutput& out) {
+    const std::uint32_t v = collapse.v;
+    gatherStar(v, a_.v_triangles, a_.v_ring);
+    const GridPoint& placed = collapse.placed;
+    if (!linkIsTwoVertices(u) || !keepsHeightField(u, v, collapse.moves, placed)) {
+      ++out.refused_for_flip;
+      return false;
+    }
+    // A moved vertex is placed on the globe exactly as the pipeline will place it.
+    const EcefPoint placed_ecef = !options_.globe ? EcefPoint{}
+                                  : collapse.moves ? options_.globe->place(placed)
+                                                   : a_.ecef[v];
+    if (std::isfinite(options_.max_error_m) && !withinBudget(u, v, collapse.moves, placed, placed_ecef)) {
+      ++out.refused_for_error;
+      return false;
+    }
+    apply(u, v, collapse.moves, placed, placed_ecef);
+    return true;
   }
 
   // The link condition of an interior edge: u and v share exactly the two vertices opposite
@@ -375,7 +457,7 @@ class ClusterCollapser {
     const auto at = [&](std::uint32_t w) -> const GridPoint& { return w == kPlaced ? placed : a_.grid[w]; };
     return allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
       return isUpwardTriangle(at(p), at(q), at(r)) &&
-             slopeOf(at(p), at(q), at(r), options_.metres_per_col, options_.metres_per_row) <= kMaxSlope;
+             !isSteeperThan(at(p), at(q), at(r), options_.metres_per_col, options_.metres_per_row, kMaxSlope);
     });
   }
 
@@ -410,7 +492,6 @@ class ClusterCollapser {
       if (options_.globe) a_.ecef[v] = placed_ecef;
     }
     a_.removed[u] = 1;
-    ++a_.stamp[u];
     a_.absorbed_next[a_.absorbed_last[v]] = u;
     a_.absorbed_last[v] = a_.absorbed_last[u];
     edges_ -= 3;
@@ -418,7 +499,7 @@ class ClusterCollapser {
     gatherStar(v, a_.v_triangles, a_.v_ring);
     a_.around.assign(a_.v_ring.begin(), a_.v_ring.end());  // enqueue reuses the star arrays
     enqueue(v);
-    for (const std::uint32_t w : a_.around) enqueue(w);
+    for (const std::uint32_t w : a_.around) requeueNextTo(w, u, v);
   }
 
   const LevelInput& in_;

@@ -163,14 +163,15 @@ bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const Gri
   return exceeds;
 }
 
-double slopeOf(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
-               double metres_per_row) {
+bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
+                   double metres_per_row, double max_slope) {
   const double ux = (b.col - a.col) * metres_per_col, uy = (b.row - a.row) * metres_per_row;
   const double vx = (c.col - a.col) * metres_per_col, vy = (c.row - a.row) * metres_per_row;
   const double det = ux * vy - uy * vx;
-  if (det == 0) return std::numeric_limits<double>::infinity();
+  if (det == 0) return true;
   const double dz1 = b.height_m - a.height_m, dz2 = c.height_m - a.height_m;
-  return std::hypot((dz1 * vy - dz2 * uy) / det, (dz2 * ux - dz1 * vx) / det);
+  const double gx = dz1 * vy - dz2 * uy, gy = dz2 * ux - dz1 * vx;  // the gradient times det
+  return gx * gx + gy * gy > max_slope * max_slope * det * det;
 }
 
 bool quadricMinimum(const Quadric& q, std::array<double, 3>& point) {

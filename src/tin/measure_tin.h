@@ -82,7 +82,9 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
   if (area2 == 0) return;
   const DrawnTriangle drawn(pa, pb, pc);
   const bool degenerate = drawn.degenerate();
+  const bool poles = globe.hasPoleRows();
   const auto onPoleRow = [&](const GridPoint& p) {
+    if (!poles) return false;
     const double row = std::round(p.row);
     return p.row == row && row >= 0 && row < dem.height && globe.poleRow(static_cast<std::int32_t>(row));
   };
@@ -93,32 +95,41 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
                          drawn.longestEdge(), 0.0);
   }
   const double margin_px = std::max(margin.columns, margin.rows);
+  // Inside (or on) the triangle in the grid: each edge function, signed so that the inside is
+  // positive, at least -eps (a relative tolerance of 1e-9 of the doubled area). Outside, a
+  // pixel may still be drawn above when it lies within the margin of every edge: the edge
+  // function over the edge's length is the distance from the edge.
+  const double sign = area2 > 0 ? 1.0 : -1.0;
   const double eps = 1e-9 * std::fabs(area2);
-  const double edge_length[3] = {std::hypot(c.col - b.col, c.row - b.row), std::hypot(a.col - c.col, a.row - c.row),
-                                 std::hypot(b.col - a.col, b.row - a.row)};  // opposite a, b, c
+  const double edge_length[3] = {std::sqrt((c.col - b.col) * (c.col - b.col) + (c.row - b.row) * (c.row - b.row)),
+                                 std::sqrt((a.col - c.col) * (a.col - c.col) + (a.row - c.row) * (a.row - c.row)),
+                                 std::sqrt((b.col - a.col) * (b.col - a.col) + (b.row - a.row) * (b.row - a.row))};
+  const double reach[3] = {-margin_px * edge_length[0], -margin_px * edge_length[1], -margin_px * edge_length[2]};
   const int min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.columns - 1e-9)));
   const int max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.columns + 1e-9)));
   const int min_row = static_cast<int>(std::max(0.0, std::ceil(std::min({a.row, b.row, c.row}) - margin.rows - 1e-9)));
   const int max_row = static_cast<int>(std::min(dem.height - 1.0, std::floor(std::max({a.row, b.row, c.row}) + margin.rows + 1e-9)));
   for (int row = min_row; row <= max_row; ++row) {
-    const bool pole_row = globe.poleRow(row);
+    const bool pole_row = poles && globe.poleRow(row);
     for (int col = min_col; col <= max_col; ++col) {
-      const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
-      const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
-      const double wc = 1.0 - wa - wb;
+      const double ea = sign * ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col));
+      const double eb = sign * ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col));
+      const double ec = std::fabs(area2) - ea - eb;
       const std::size_t pixel = dem.index(col, row);
-      if (wa * std::fabs(area2) >= -eps && wb * std::fabs(area2) >= -eps && wc * std::fabs(area2) >= -eps) {
-        const double offset_m = degenerate || pole_row
-                                    ? wa * a.height_m + wb * b.height_m + wc * c.height_m - dem.heights_m[pixel]
-                                    : drawn.offset(globe.point(pixel), globe.up(pixel));
+      if (ea >= -eps && eb >= -eps && ec >= -eps) {
+        double offset_m;
+        if (degenerate || pole_row) {
+          const double wa = ea * sign / area2, wb = eb * sign / area2;
+          offset_m = wa * a.height_m + wb * b.height_m + (1.0 - wa - wb) * c.height_m - dem.heights_m[pixel];
+        } else {
+          offset_m = drawn.offset(globe.point(pixel), globe.up(pixel));
+        }
         if (!visit(pixel, offset_m)) return;
         continue;
       }
       if (degenerate || pole_row) continue;
       // Outside in the grid: within the margin of every edge, and met as drawn?
-      const double distance = std::min({wa * std::fabs(area2) / edge_length[0], wb * std::fabs(area2) / edge_length[1],
-                                        wc * std::fabs(area2) / edge_length[2]});
-      if (distance < -margin_px) continue;
+      if (ea < reach[0] || eb < reach[1] || ec < reach[2]) continue;
       double offset_m = 0;
       if (drawn.meets(globe.point(pixel), globe.up(pixel), &offset_m) && !visit(pixel, offset_m)) return;
     }
