@@ -89,6 +89,7 @@ struct CrsToWgs84::Impl {
   std::unique_ptr<OGRCoordinateTransformation> transform;
   std::string source_name;
   bool rigorous_lv95 = false;
+  bool is_wgs84 = false;  // the source is WGS84 longitude and latitude in degrees: nothing to do
   std::vector<std::string> warnings;
 };
 
@@ -111,6 +112,15 @@ CrsToWgs84::CrsToWgs84(const std::string& crs_wkt, TransformEngine engine)
                                          : std::string(impl_->source.GetName() ? impl_->source.GetName() : "CRS");
   if (engine == TransformEngine::Auto && impl_->source_name == "EPSG:2056") {
     impl_->rigorous_lv95 = true;
+    return;
+  }
+
+  // WGS84 itself (EPSG:4326, as SRTM and ETOPO5 come): PROJ's transformation is a no-op, and
+  // one call per point (a vertex a collapse moves) costs more than the rest of its placing.
+  const char* const same_options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=NO", "CRITERION=EQUIVALENT", nullptr};
+  if (engine == TransformEngine::Auto && impl_->source.IsGeographic() && !impl_->source.IsDerivedGeographic() &&
+      impl_->source.IsSame(&impl_->target, same_options)) {
+    impl_->is_wgs84 = true;
     return;
   }
 
@@ -160,6 +170,7 @@ const std::vector<std::string>& CrsToWgs84::warnings() const { return impl_->war
 const std::string& CrsToWgs84::sourceName() const { return impl_->source_name; }
 
 std::string CrsToWgs84::pathDescription() const {
+  if (impl_->is_wgs84) return impl_->source_name + " is WGS84 longitude and latitude (no transformation)";
   return impl_->rigorous_lv95 ? impl_->source_name + " -> WGS84 by the rigorous swisstopo formulas"
                               : impl_->source_name + " -> WGS84 by PROJ";
 }
@@ -168,6 +179,13 @@ void CrsToWgs84::transform(std::span<const CrsPoint> in, std::span<GeodeticPoint
   TERRATILES_ASSERT(in.size() == out.size());
   if (impl_->rigorous_lv95) {
     lv95ToWgs84(in, out);
+    return;
+  }
+  if (impl_->is_wgs84) {
+    for (std::size_t i = 0; i < in.size(); ++i) {
+      out[i].lon_deg = in[i].x;
+      out[i].lat_deg = in[i].y;
+    }
     return;
   }
   // Batches of at most 65536 points; a short call (one vertex a collapse moves) allocates only

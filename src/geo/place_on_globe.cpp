@@ -10,7 +10,10 @@ namespace terratiles {
 void placeOnGlobe(const DemGrid& dem, std::span<const GridPoint> points, const CrsToWgs84& to_wgs84,
                   const GeoidGrid* geoid, std::span<GeodeticPoint> geodetic, std::span<EcefPoint> ecef) {
   TERRATILES_ASSERT(points.size() == geodetic.size() && points.size() == ecef.size());
-  std::vector<CrsPoint> crs(points.size());
+  // One point (a vertex a collapse moves) without an allocation.
+  CrsPoint one;
+  std::vector<CrsPoint> many(points.size() == 1 ? 0 : points.size());
+  const std::span<CrsPoint> crs = points.size() == 1 ? std::span<CrsPoint>(&one, 1) : std::span<CrsPoint>(many);
   for (std::size_t i = 0; i < points.size(); ++i) {
     crs[i] = dem.pixelCentre(points[i].col, points[i].row);
     geodetic[i].height_m = points[i].height_m;  // PROJ's datum shifts use it (see CrsToWgs84)

@@ -35,7 +35,9 @@ inline std::uint32_t nextCorner(std::uint32_t corner) { return corner % 3 == 2 ?
 
 struct InputTopology {
   std::vector<std::uint32_t> opposite_corner;   // per corner: the other triangle's corner of that edge, or kNone
-  std::vector<std::uint64_t> sorted_edge_keys;  // every undirected edge once, sorted
+  // The corners leaving each vertex, in corner order: leaving[leaving_start[v] ..
+  // leaving_start[v + 1]) (corner c runs from its vertex to the next corner's).
+  std::vector<std::uint32_t> leaving_start, leaving;
 };
 
 // The level to simplify, as simplifyClusters prepared it.
@@ -109,8 +111,16 @@ bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, d
 // pixel inclusion and measure of measureTin (in the grid frame, or on the globe with the
 // corners' ECEF positions), so measureTin confirms the budget.
 bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c, double budget_m);
+// violating_pixel: when not null and the budget is exceeded, the first pixel found beyond it.
 bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
-                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m);
+                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
+                          std::size_t* violating_pixel = nullptr);
+// Whether `pixel` (valid, inside the triangle in the grid) is beyond the budget: a pixel that
+// broke the budget of a vertex's earlier collapses, tested first (exceedsBudgetOnGlobe would
+// find it too).
+bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
+                          std::size_t pixel);
 
 // The engines: one ClusterOutput per cluster id (empty for an empty cluster).
 std::vector<ClusterOutput> collapseWithCgal(const LevelInput& level);

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <functional>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <utility>
@@ -38,6 +39,8 @@ std::vector<std::uint8_t> lockedVertices(const LevelInput& in) {
   return locked;
 }
 
+constexpr std::size_t kNoPixel = std::numeric_limits<std::size_t>::max();
+
 // A collapse of the vertex under way, u: u goes to v, and v stays or moves.
 struct Collapse {
   double cost = 0;
@@ -58,6 +61,7 @@ struct ClusterArrays {
   std::vector<std::array<double, 3>> metres;   // x east, y north, z up, from the cluster's first vertex
   std::vector<Quadric> quadric;
   std::vector<std::uint8_t> locked, removed;
+  std::vector<std::size_t> broken_pixel;  // per local vertex: the last pixel beyond the budget of one of its collapses
   std::vector<std::uint32_t> corners;          // 3 local vertices per local triangle
   std::vector<std::uint8_t> alive;             // per local triangle
   // Per local vertex: the triangles it was in at the start (CSR). A vertex's triangles now are
@@ -74,6 +78,14 @@ struct ClusterArrays {
   std::vector<std::uint32_t> heap, heap_place;
   std::vector<std::uint32_t> u_triangles, u_ring, v_triangles, v_ring, around;
   std::vector<Collapse> targets;  // the collapses of the vertex under way
+  // Points placed on the globe, by their grid point's bits (direct-mapped): a vertex refused
+  // for its budget is tried again at the same optimum after every collapse next to it, and
+  // placing a point (CRS, geoid, ECEF) costs more than the rest of a try.
+  struct PlacedPoint {
+    GridPoint grid{std::numeric_limits<double>::quiet_NaN(), 0, 0};
+    EcefPoint ecef;
+  };
+  std::vector<PlacedPoint> placed_points = std::vector<PlacedPoint>(65536);
 };
 
 class ClusterCollapser {
@@ -318,15 +330,18 @@ class ClusterCollapser {
     return u;
   }
 
-  // Every collapse of u into its neighbour v, passed to add: u -> v (v stays where it is),
+  // The collapses of u into its neighbour v, passed to add: u -> v (v stays where it is),
   // and with v free too, v moved to the edge's quadric optimum and to the best point of the
-  // segment uv (when they exist).
+  // segment uv (when they exist). The segment's point costs at least the optimum (the
+  // quadric's least value), so `all` false leaves it out when the optimum exists: the
+  // cheapest of them (the queue's key) needs it only when the optimum does not.
   template <typename Add>
-  void collapsesInto(std::uint32_t u, std::uint32_t v, Add&& add) const {
+  void collapsesInto(std::uint32_t u, std::uint32_t v, bool all, Add&& add) const {
     add(Collapse{cost(u, v), v, false, a_.grid[v]});
     if (a_.locked[v]) return;
     const Collapse moved = quadricOptimum(u, v);
     if (moved.moves) add(moved);
+    if (moved.moves && !all) return;
     const Collapse on_edge = segmentOptimum(u, v);
     if (on_edge.moves) add(on_edge);
   }
@@ -338,7 +353,7 @@ class ClusterCollapser {
     Collapse cheapest;
     cheapest.cost = std::numeric_limits<double>::infinity();
     for (const std::uint32_t v : a_.u_ring) {
-      collapsesInto(u, v, [&](const Collapse& c) {
+      collapsesInto(u, v, false, [&](const Collapse& c) {
         if (c < cheapest) cheapest = c;
       });
     }
@@ -358,7 +373,7 @@ class ClusterCollapser {
       return;
     }
     Collapse cheapest = a_.best[w];
-    collapsesInto(w, v, [&](const Collapse& c) {
+    collapsesInto(w, v, false, [&](const Collapse& c) {
       if (c < cheapest) cheapest = c;
     });
     queueAt(w, cheapest);
@@ -373,6 +388,7 @@ class ClusterCollapser {
     a_.absorbed_last.resize(vertices);
     for (std::uint32_t v = 0; v < vertices; ++v) a_.absorbed_last[v] = v;
     a_.removed.assign(vertices, 0);
+    a_.broken_pixel.assign(vertices, kNoPixel);
     a_.best.assign(vertices, Collapse{});
     a_.heap.clear();
     a_.heap_place.assign(vertices, kNone);
@@ -390,7 +406,7 @@ class ClusterCollapser {
     if (accepts(u, first, out)) return true;
     a_.targets.clear();
     for (const std::uint32_t v : a_.u_ring) {
-      collapsesInto(u, v, [&](const Collapse& c) {
+      collapsesInto(u, v, true, [&](const Collapse& c) {
         if (first < c || c < first) a_.targets.push_back(c);
       });
     }
@@ -411,9 +427,7 @@ class ClusterCollapser {
       return false;
     }
     // A moved vertex is placed on the globe exactly as the pipeline will place it.
-    const EcefPoint placed_ecef = !options_.globe ? EcefPoint{}
-                                  : collapse.moves ? options_.globe->place(placed)
-                                                   : a_.ecef[v];
+    const EcefPoint placed_ecef = !options_.globe ? EcefPoint{} : collapse.moves ? placeOnGlobe(placed) : a_.ecef[v];
     if (std::isfinite(options_.max_error_m) && !withinBudget(u, v, collapse.moves, placed, placed_ecef)) {
       ++out.refused_for_error;
       return false;
@@ -461,15 +475,43 @@ class ClusterCollapser {
     });
   }
 
+  EcefPoint placeOnGlobe(const GridPoint& g) {
+    std::uint64_t bits[3];
+    std::memcpy(bits, &g, sizeof bits);
+    std::uint64_t hash = (bits[0] * 0x9E3779B97F4A7C15ull) ^ (bits[1] * 0xC2B2AE3D27D4EB4Full) ^ (bits[2] * 0x165667B19E3779F9ull);
+    hash ^= hash >> 29;
+    ClusterArrays::PlacedPoint& entry = a_.placed_points[hash & (a_.placed_points.size() - 1)];
+    if (std::memcmp(&entry.grid, &g, sizeof g) != 0) {
+      entry.grid = g;
+      entry.ecef = options_.globe->place(g);
+    }
+    return entry.ecef;
+  }
+
+  // The budget: a pixel that broke one of u's collapses before is tested first against every
+  // new triangle (it usually breaks the next try too), then every pixel.
   bool withinBudget(std::uint32_t u, std::uint32_t v, bool moves, const GridPoint& placed,
-                    const EcefPoint& placed_ecef) const {
+                    const EcefPoint& placed_ecef) {
     const double budget_m = options_.max_error_m;
     const DemOnGlobe* globe = options_.globe;
     const auto at = [&](std::uint32_t w) -> const GridPoint& { return w == kPlaced ? placed : a_.grid[w]; };
     const auto ecefAt = [&](std::uint32_t w) -> const EcefPoint& { return w == kPlaced ? placed_ecef : a_.ecef[w]; };
+    if (!globe) {
+      return allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
+        return !exceedsBudget(*in_.dem, at(p), at(q), at(r), budget_m);
+      });
+    }
+    std::size_t& remembered = a_.broken_pixel[u];
+    if (remembered != kNoPixel &&
+        !allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
+          return !exceedsBudgetAtPixel(*globe, at(p), at(q), at(r), ecefAt(p), ecefAt(q), ecefAt(r), budget_m,
+                                       remembered);
+        })) {
+      return false;
+    }
     return allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
-      return globe ? !exceedsBudgetOnGlobe(*globe, at(p), at(q), at(r), ecefAt(p), ecefAt(q), ecefAt(r), budget_m)
-                   : !exceedsBudget(*in_.dem, at(p), at(q), at(r), budget_m);
+      return !exceedsBudgetOnGlobe(*globe, at(p), at(q), at(r), ecefAt(p), ecefAt(q), ecefAt(r), budget_m,
+                                   &remembered);
     });
   }
 

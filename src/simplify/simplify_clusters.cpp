@@ -21,45 +21,70 @@ std::string edgeText(std::uint64_t key) {
   return "(" + std::to_string(key >> 32) + ", " + std::to_string(key & 0xffffffffu) + ")";
 }
 
+// The corners leaving each vertex (CSR): corner c runs from its vertex to the next corner's.
+// An edge's other corner is then among the few leaving its far end: linear time, where a sort
+// of every directed edge took a quarter of a level's simplification.
 InputTopology buildTopology(const TinMesh& mesh) {
-  const std::size_t corners = mesh.triangle_indices.size();
+  const std::vector<std::uint32_t>& idx = mesh.triangle_indices;
+  const std::size_t corners = idx.size();
   TERRATILES_ASSERT(corners < kNone);
   InputTopology topology;
-  struct DirectedEdge {
-    std::uint64_t key;
-    std::uint32_t corner;
-  };
-  std::vector<DirectedEdge> edges(corners);
-  for (std::uint32_t c = 0; c < corners; ++c) {
-    edges[c] = {edgeKey(mesh.triangle_indices[c], mesh.triangle_indices[nextCorner(c)]), c};
-  }
-  std::sort(edges.begin(), edges.end(), [](const DirectedEdge& l, const DirectedEdge& r) {
-    return l.key != r.key ? l.key < r.key : l.corner < r.corner;
-  });
-  topology.opposite_corner.assign(corners, kNone);
-  for (std::size_t i = 0; i < edges.size();) {
-    std::size_t j = i + 1;
-    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
-    topology.sorted_edge_keys.push_back(edges[i].key);
-    if (j - i > 2) {
-      throw Error(ErrorCode::Input,
-                  "simplifyClusters: edge " + edgeText(edges[i].key) + " is in " + std::to_string(j - i) +
-                      " triangles; expected an edge-manifold mesh (at most two triangles per edge)");
+  std::vector<std::uint32_t>& start = topology.leaving_start;
+  std::vector<std::uint32_t>& leaving = topology.leaving;
+  start.assign(mesh.vertices.size() + 1, 0);
+  for (std::uint32_t c = 0; c < corners; ++c) ++start[idx[c] + 1];
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) start[v + 1] += start[v];
+  leaving.resize(corners);
+  std::vector<std::uint32_t> end(corners);  // per entry of `leaving`: the vertex it runs to
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::uint32_t t = 0; 3 * t < corners; ++t) {
+      for (std::uint32_t k = 0; k < 3; ++k) {
+        const std::uint32_t c = 3 * t + k, i = fill[idx[c]]++;
+        leaving[i] = c;  // in corner order
+        end[i] = idx[3 * t + (k == 2 ? 0 : k + 1)];
+      }
     }
-    if (j - i == 2) {
-      const std::uint32_t a = edges[i].corner, b = edges[i + 1].corner;
-      if (mesh.triangle_indices[a] == mesh.triangle_indices[b]) {
+  }
+  topology.opposite_corner.assign(corners, kNone);
+  const std::size_t vertices = mesh.vertices.size();
+  for (std::uint32_t u = 0; u < vertices; ++u) {
+    for (std::uint32_t e = start[u]; e < start[u + 1]; ++e) {
+      const std::uint32_t c = leaving[e], v = end[e];
+      // Corners running u -> v (c among them, in corner order) and v -> u.
+      std::uint32_t along[2], against = kNone;
+      std::size_t same = 0, reverse = 0;
+      for (std::uint32_t i = start[u]; i < start[u + 1]; ++i) {
+        if (end[i] == v && same++ < 2) along[same - 1] = leaving[i];
+      }
+      for (std::uint32_t i = start[v]; i < start[v + 1]; ++i) {
+        if (end[i] == u && reverse++ == 0) against = leaving[i];
+      }
+      if (same + reverse > 2) {
         throw Error(ErrorCode::Input,
-                    "simplifyClusters: triangles " + std::to_string(a / 3) + " and " + std::to_string(b / 3) +
-                        " run edge " + edgeText(edges[i].key) +
+                    "simplifyClusters: edge " + edgeText(edgeKey(u, v)) + " is in " + std::to_string(same + reverse) +
+                        " triangles; expected an edge-manifold mesh (at most two triangles per edge)");
+      }
+      if (same == 2) {
+        throw Error(ErrorCode::Input,
+                    "simplifyClusters: triangles " + std::to_string(along[0] / 3) + " and " +
+                        std::to_string(along[1] / 3) + " run edge " + edgeText(edgeKey(u, v)) +
                         " in the same direction; expected every triangle counter-clockwise seen from above");
       }
-      topology.opposite_corner[a] = b;
-      topology.opposite_corner[b] = a;
+      if (reverse == 1) topology.opposite_corner[c] = against;
     }
-    i = j;
   }
   return topology;
+}
+
+bool hasEdge(const TinMesh& mesh, const InputTopology& topology, std::uint32_t a, std::uint32_t b) {
+  const auto leavesTo = [&](std::uint32_t from, std::uint32_t to) {
+    for (std::uint32_t i = topology.leaving_start[from]; i < topology.leaving_start[from + 1]; ++i) {
+      if (mesh.triangle_indices[nextCorner(topology.leaving[i])] == to) return true;
+    }
+    return false;
+  };
+  return a < mesh.vertices.size() && b < mesh.vertices.size() && (leavesTo(a, b) || leavesTo(b, a));
 }
 
 void validateOptions(const SimplifyOptions& options) {
@@ -154,13 +179,26 @@ bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, c
 }
 
 bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
-                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m) {
+                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
+                          std::size_t* violating_pixel) {
   bool exceeds = false;
   forEachCoveredPixelOnGlobe(globe, a, b, c, pa, pb, pc, [&](std::size_t i, double offset_m) {
     exceeds = !std::isnan(globe.dem().heights_m[i]) && !(std::fabs(offset_m) <= budget_m);
+    if (exceeds && violating_pixel) *violating_pixel = i;
     return !exceeds;
   });
   return exceeds;
+}
+
+bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
+                          std::size_t pixel) {
+  const DemGrid& dem = globe.dem();
+  if (std::isnan(dem.heights_m[pixel])) return false;
+  const auto row = static_cast<std::int32_t>(pixel / static_cast<std::size_t>(dem.width));
+  const auto col = static_cast<std::int32_t>(pixel % static_cast<std::size_t>(dem.width));
+  double offset_m = 0;
+  return coveredInsideOnGlobe(globe, a, b, c, pa, pb, pc, col, row, &offset_m) && !(std::fabs(offset_m) <= budget_m);
 }
 
 bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
@@ -222,8 +260,7 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
   constrained_keys.reserve(constrained_edges.size());
   for (const auto& edge : constrained_edges) {
     const std::uint64_t key = edgeKey(edge[0], edge[1]);
-    if (edge[0] == edge[1] ||
-        !std::binary_search(topology.sorted_edge_keys.begin(), topology.sorted_edge_keys.end(), key)) {
+    if (edge[0] == edge[1] || !hasEdge(mesh, topology, edge[0], edge[1])) {
       throw Error(ErrorCode::Input, "simplifyClusters: constrained edge (" + std::to_string(edge[0]) + ", " +
                                         std::to_string(edge[1]) + ") is not an edge of the mesh");
     }

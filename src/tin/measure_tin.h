@@ -74,6 +74,39 @@ void forEachCoveredPixel(const DemGrid& dem, const GridPoint& a, const GridPoint
 // degenerate in ECEF (two corners at a pole), is measured in the grid: the linearly
 // interpolated height minus the DEM's. A nodata pixel is visited too (with an offset from its
 // placeholder point). visit returns false to stop.
+// One pixel by forEachCoveredPixelOnGlobe's rule for pixels inside the triangle in the grid
+// (the stray pixels outside it are left out): whether the pixel at (col, row) is inside, and
+// if so *offset_m, the offset the scan visits it with. For a remembered pixel, tested before a
+// whole scan: what it finds there, the scan would find too.
+inline bool coveredInsideOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                                 const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, std::int32_t col,
+                                 std::int32_t row, double* offset_m) {
+  const DemGrid& dem = globe.dem();
+  const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+  if (area2 == 0) return false;
+  // Inside the scan's box before its margin (which only grows it).
+  if (col < std::ceil(std::min({a.col, b.col, c.col}) - 1e-9) || col > std::floor(std::max({a.col, b.col, c.col}) + 1e-9) ||
+      row < std::ceil(std::min({a.row, b.row, c.row}) - 1e-9) || row > std::floor(std::max({a.row, b.row, c.row}) + 1e-9) ||
+      col < 0 || row < 0 || col >= dem.width || row >= dem.height) {
+    return false;
+  }
+  const double sign = area2 > 0 ? 1.0 : -1.0;
+  const double eps = 1e-9 * std::fabs(area2);
+  const double ea = sign * ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col));
+  const double eb = sign * ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col));
+  const double ec = std::fabs(area2) - ea - eb;
+  if (!(ea >= -eps && eb >= -eps && ec >= -eps)) return false;
+  const std::size_t pixel = dem.index(col, row);
+  const DrawnTriangle drawn(pa, pb, pc);
+  if (drawn.degenerate() || (globe.hasPoleRows() && globe.poleRow(row))) {
+    const double wa = ea * sign / area2, wb = eb * sign / area2;
+    *offset_m = wa * a.height_m + wb * b.height_m + (1.0 - wa - wb) * c.height_m - dem.heights_m[pixel];
+  } else {
+    *offset_m = drawn.offset(globe.point(pixel), globe.up(pixel));
+  }
+  return true;
+}
+
 template <typename Visit>
 void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                                 const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, Visit&& visit) {
