@@ -110,12 +110,12 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
   FacePartition inherited;  // fixed borders: the clusters of the level just built
   for (std::size_t l = 0;; ++l) {
     Level& level = levels[l];
-    progress.beginStage("level " + std::to_string(l) + ": measuring", 0);
+    progress.beginStage("level " + std::to_string(l) + (options.measure ? ": measuring" : ": placing vertices"), 0);
     if (options.globe) {
       level.vertex_ecef.resize(level.mesh.vertices.size());
       options.globe->place(level.mesh.vertices, {}, level.vertex_ecef);
-      level.error = measureTin(*options.globe, level.mesh, level.vertex_ecef);
-    } else {
+      if (options.measure) level.error = measureTin(*options.globe, level.mesh, level.vertex_ecef);
+    } else if (options.measure) {
       level.error = measureTin(dem, level.mesh);
     }
     if (l == 0) level.edge_count = meshEdgeKeys(level.mesh).size();  // coarser levels: counted below

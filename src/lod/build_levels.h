@@ -63,6 +63,10 @@ struct LevelOptions {
   // (straight triangles in ECEF, errors along each pixel's vertical; DemOnGlobe). nullptr: in
   // the grid frame, heights interpolated linearly.
   const DemOnGlobe* globe = nullptr;
+  // Measure every level against the DEM on every pixel (Level::error, which `levels` reports).
+  // false: only place its vertices on the globe (the build measures its tiles instead, as
+  // drawn and after quantisation: a second measure of every level would only cost time).
+  bool measure = true;
 };
 
 struct Level {
@@ -75,7 +79,7 @@ struct Level {
   FacePartition inherited_partition;
   // Per vertex of this level: its index in the next coarser level, or kRemovedVertex.
   std::vector<std::uint32_t> index_in_coarser;
-  TinErrorStatistics error;  // measured against the DEM
+  TinErrorStatistics error;  // measured against the DEM (LevelOptions::measure)
   // With LevelOptions::globe: every vertex placed on the globe (DemOnGlobe::place).
   std::vector<EcefPoint> vertex_ecef;
   std::size_t edge_count = 0;

@@ -457,6 +457,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     level_options.clusters_per_level = plan.clusters_per_level;
     level_options.level_ratio = options.level_ratio;
     level_options.simplifier = options.simplifier;
+    level_options.measure = false;  // the tiles are measured as drawn
     if (options.level_error_growth > 0) {
       level_options.level_error_growth = options.level_error_growth;
       level_options.first_budget_m = options.tin_max_error_m * options.level_error_growth;
@@ -474,7 +475,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       levels[0].mesh = std::move(finest.mesh);
       levels[0].vertex_ecef.resize(levels[0].mesh.vertices.size());
       globe.place(levels[0].mesh.vertices, {}, levels[0].vertex_ecef);
-      levels[0].error = measureTin(globe, levels[0].mesh, levels[0].vertex_ecef);
     }
     progress.beginStage("assigning clusters to tiles", levels.size());
     std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;

@@ -440,13 +440,10 @@ std::vector<ClusterOutput> collapseWithCgal(const LevelInput& in) {
   // cluster's triangles, which no other cluster has.
   std::vector<std::uint32_t> local_of_class(in.mesh->triangle_indices.size(), kNone);
   std::vector<ClusterOutput> outputs(clusters);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, clusters, 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      if (cluster_start[c] == cluster_start[c + 1]) continue;
-      outputs[c] = simplifyOneCluster(in, class_of_corner, static_cast<std::int32_t>(c),
-                                      faces_by_cluster.data() + cluster_start[c],
-                                      faces_by_cluster.data() + cluster_start[c + 1], local_of_class);
-    }
+  forEachClusterLargestFirst(cluster_start, [&](std::uint32_t c) {
+    outputs[c] = simplifyOneCluster(in, class_of_corner, static_cast<std::int32_t>(c),
+                                    faces_by_cluster.data() + cluster_start[c],
+                                    faces_by_cluster.data() + cluster_start[c + 1], local_of_class);
   });
   return outputs;
 }

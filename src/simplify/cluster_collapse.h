@@ -6,7 +6,13 @@
 // builds the topology and assembles; cgal_edge_collapse.cpp and native_edge_collapse.cpp
 // simplify the clusters.
 
+#include <algorithm>
+#include <tbb/task_arena.h>
+#include <tbb/task_group.h>
+
 #include <array>
+#include <atomic>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -83,17 +89,50 @@ inline double evaluate(const Quadric& q, double x, double y, double z) {
 // Where the quadric is least (Garland and Heckbert's optimal placement): A x = -b with A its
 // upper 3x3 block, by Cramer's rule. False when the system is ill-conditioned (|det| at most
 // 1e-12 trace^3), where the optimum would run far away over nearly flat ground.
-bool quadricMinimum(const Quadric& q, std::array<double, 3>& point);
+inline bool quadricMinimum(const Quadric& q, std::array<double, 3>& point) {
+  const double a00 = q[0], a01 = q[1], a02 = q[2], a11 = q[4], a12 = q[5], a22 = q[7];
+  const double b0 = -q[3], b1 = -q[6], b2 = -q[8];
+  const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+  const double det = a00 * c00 + a01 * c01 + a02 * c02;
+  const double trace = a00 + a11 + a22;
+  if (!(std::fabs(det) > 1e-12 * trace * trace * trace)) return false;
+  const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+  point = {(c00 * b0 + c01 * b1 + c02 * b2) / det, (c01 * b0 + c11 * b1 + c12 * b2) / det,
+           (c02 * b0 + c12 * b1 + c22 * b2) / det};
+  return true;
+}
 
 // Where the quadric is least along p0 + t d (CGAL's construct_optimal_point_singular): t when
 // the quadric curves upward along d and t lies strictly inside (0, 1); nullopt otherwise.
-std::optional<double> segmentMinimum(const Quadric& q, const std::array<double, 3>& p0,
-                                     const std::array<double, 3>& d);
+inline std::optional<double> segmentMinimum(const Quadric& q, const std::array<double, 3>& p0,
+                                            const std::array<double, 3>& d) {
+  const double qa = q[0] * d[0] * d[0] + 2 * q[1] * d[0] * d[1] + 2 * q[2] * d[0] * d[2] + q[4] * d[1] * d[1] +
+                    2 * q[5] * d[1] * d[2] + q[7] * d[2] * d[2];  // (d, 0)^T Q (d, 0)
+  const double qb = 2 * (q[0] * p0[0] * d[0] + q[1] * (p0[0] * d[1] + p0[1] * d[0]) +
+                         q[2] * (p0[0] * d[2] + p0[2] * d[0]) + q[4] * p0[1] * d[1] +
+                         q[5] * (p0[1] * d[2] + p0[2] * d[1]) + q[7] * p0[2] * d[2] + q[3] * d[0] +
+                         q[6] * d[1] + q[8] * d[2]);  // 2 (p0, 1)^T Q (d, 0)
+  if (!(qa > 0)) return std::nullopt;
+  const double t = -qb / (2 * qa);
+  if (!(t > 0 && t < 1)) return std::nullopt;
+  return t;
+}
+
+// Twice the signed area in (col, row); negative means counter-clockwise seen from above.
+inline double signedArea2(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+  return (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+}
 
 // Counter-clockwise seen from above and not degenerate: twice the area in (col, row) above
 // 1e-9 times the longest edge squared, so the sign is stable under rounding whatever vertex a
 // reader starts at.
-bool isUpwardTriangle(const GridPoint& a, const GridPoint& b, const GridPoint& c);
+inline bool isUpwardTriangle(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+  auto squared = [](const GridPoint& p, const GridPoint& q) {
+    return (p.col - q.col) * (p.col - q.col) + (p.row - q.row) * (p.row - q.row);
+  };
+  const double longest2 = std::max({squared(a, b), squared(b, c), squared(c, a)});
+  return signedArea2(a, b, c) < -1e-9 * longest2;
+}
 
 // A face steeper than this (rise over run, about 89.4 degrees) is a wall no terrain level
 // needs: simplification only makes one when it pulls a vertex next to a much higher or lower
@@ -104,8 +143,16 @@ inline constexpr double kMaxSlope = 100;
 // Whether the triangle rises more than max_slope (rise over run in metres) anywhere, or is
 // vertical or degenerate: its gradient's squared length against max_slope^2, without a root or
 // a division.
-bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
-                   double metres_per_row, double max_slope);
+inline bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
+                          double metres_per_row, double max_slope) {
+  const double ux = (b.col - a.col) * metres_per_col, uy = (b.row - a.row) * metres_per_row;
+  const double vx = (c.col - a.col) * metres_per_col, vy = (c.row - a.row) * metres_per_row;
+  const double det = ux * vy - uy * vx;
+  if (det == 0) return true;
+  const double dz1 = b.height_m - a.height_m, dz2 = c.height_m - a.height_m;
+  const double gx = dz1 * vy - dz2 * uy, gy = dz2 * ux - dz1 * vx;  // the gradient times det
+  return gx * gx + gy * gy > max_slope * max_slope * det * det;
+}
 
 // True when some valid DEM pixel the triangle covers is more than budget_m away from it: the
 // pixel inclusion and measure of measureTin (in the grid frame, or on the globe with the
@@ -121,6 +168,28 @@ bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const Gri
 bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                           const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
                           std::size_t pixel);
+
+// Runs simplify(c) for every non-empty cluster c, largest first, each thread taking the next
+// cluster as it finishes one: at a coarse level a few large clusters would otherwise leave a
+// core idle at the end. (Where each cluster's result goes does not depend on the order.)
+template <typename Simplify>
+void forEachClusterLargestFirst(const std::vector<std::uint32_t>& cluster_start, Simplify&& simplify) {
+  std::vector<std::uint32_t> order;
+  for (std::uint32_t c = 0; c + 1 < cluster_start.size(); ++c) {
+    if (cluster_start[c] != cluster_start[c + 1]) order.push_back(c);
+  }
+  const auto size = [&](std::uint32_t c) { return cluster_start[c + 1] - cluster_start[c]; };
+  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return size(a) > size(b); });
+  std::atomic<std::size_t> next{0};
+  tbb::task_group workers;
+  const int threads = std::max(1, std::min<int>(tbb::this_task_arena::max_concurrency(), static_cast<int>(order.size())));
+  for (int w = 0; w < threads; ++w) {
+    workers.run([&] {
+      for (std::size_t i = next++; i < order.size(); i = next++) simplify(order[i]);
+    });
+  }
+  workers.wait();
+}
 
 // The engines: one ClusterOutput per cluster id (empty for an empty cluster).
 std::vector<ClusterOutput> collapseWithCgal(const LevelInput& level);

@@ -193,11 +193,6 @@ class ClusterCollapser {
     return sum;
   }
 
-  // u -> v, v staying where it is.
-  double cost(std::uint32_t u, std::uint32_t v) const {
-    const auto& p = a_.metres[v];
-    return std::max(0.0, evaluate(combined(u, v), p[0], p[1], p[2]));
-  }
 
   // u -> v with v moved to g, at the cost of the edge's quadric q there.
   Collapse movedTo(const Quadric& q, std::uint32_t v, const GridPoint& g) const {
@@ -208,8 +203,7 @@ class ClusterCollapser {
   // Both ends free: the point of segment uv where the edge's quadric is least (CGAL's
   // fallback placement when the optimum is unusable), strictly between the ends; none
   // (moves false) otherwise.
-  Collapse segmentOptimum(std::uint32_t u, std::uint32_t v) const {
-    const Quadric q = combined(u, v);
+  Collapse segmentOptimum(const Quadric& q, std::uint32_t u, std::uint32_t v) const {
     const auto& p0 = a_.metres[v];
     const auto& p1 = a_.metres[u];
     const std::optional<double> t = segmentMinimum(q, p0, {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]});
@@ -222,8 +216,7 @@ class ClusterCollapser {
 
   // Both ends free: the edge's quadric optimum (CGAL's Garland-Heckbert placement) with its
   // cost; none (moves false) when the 3x3 system is ill-conditioned or the optimum is an end.
-  Collapse quadricOptimum(std::uint32_t u, std::uint32_t v) const {
-    const Quadric q = combined(u, v);
+  Collapse quadricOptimum(const Quadric& q, std::uint32_t u, std::uint32_t v) const {
     std::array<double, 3> optimum;
     if (!quadricMinimum(q, optimum)) return {};
     const GridPoint g{optimum[0] / options_.metres_per_col + origin_.col,
@@ -337,12 +330,14 @@ class ClusterCollapser {
   // cheapest of them (the queue's key) needs it only when the optimum does not.
   template <typename Add>
   void collapsesInto(std::uint32_t u, std::uint32_t v, bool all, Add&& add) const {
-    add(Collapse{cost(u, v), v, false, a_.grid[v]});
+    const Quadric q = combined(u, v);
+    const auto& p = a_.metres[v];
+    add(Collapse{std::max(0.0, evaluate(q, p[0], p[1], p[2])), v, false, a_.grid[v]});
     if (a_.locked[v]) return;
-    const Collapse moved = quadricOptimum(u, v);
+    const Collapse moved = quadricOptimum(q, u, v);
     if (moved.moves) add(moved);
     if (moved.moves && !all) return;
-    const Collapse on_edge = segmentOptimum(u, v);
+    const Collapse on_edge = segmentOptimum(q, u, v);
     if (on_edge.moves) add(on_edge);
   }
 
@@ -566,14 +561,10 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
     return arrays;
   });
   std::vector<ClusterOutput> outputs(clusters);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, clusters, 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    ClusterArrays& arrays = per_thread.local();
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      if (cluster_start[c] == cluster_start[c + 1]) continue;
-      ClusterCollapser cluster(in, locked, arrays);
-      outputs[c] = cluster.simplify(static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
-                                    faces_by_cluster.data() + cluster_start[c + 1]);
-    }
+  forEachClusterLargestFirst(cluster_start, [&](std::uint32_t c) {
+    ClusterCollapser cluster(in, locked, per_thread.local());
+    outputs[c] = cluster.simplify(static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
+                                  faces_by_cluster.data() + cluster_start[c + 1]);
   });
   return outputs;
 }

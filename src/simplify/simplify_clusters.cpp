@@ -149,21 +149,6 @@ void validateMesh(const TinMesh& mesh, const std::vector<std::int32_t>& cluster_
 }  // namespace
 
 
-// Twice the signed area in (col, row); negative means counter-clockwise seen from above.
-double signedArea2(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-  return (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
-}
-
-// Counter-clockwise seen from above and not degenerate. The margin (relative to the longest
-// edge) keeps the sign of the area stable under rounding, whatever vertex a reader starts at.
-bool isUpwardTriangle(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-  auto squared = [](const GridPoint& p, const GridPoint& q) {
-    return (p.col - q.col) * (p.col - q.col) + (p.row - q.row) * (p.row - q.row);
-  };
-  const double longest2 = std::max({squared(a, b), squared(b, c), squared(c, a)});
-  return signedArea2(a, b, c) < -1e-9 * longest2;
-}
-
 // True when some valid DEM pixel the triangle covers is more than budget_m away from it. Same
 // pixel inclusion and measure as measureTin (in the grid frame, or on the globe with the
 // corners' ECEF positions), so measureTin confirms the budget.
@@ -199,44 +184,6 @@ bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const Gri
   const auto col = static_cast<std::int32_t>(pixel % static_cast<std::size_t>(dem.width));
   double offset_m = 0;
   return coveredInsideOnGlobe(globe, a, b, c, pa, pb, pc, col, row, &offset_m) && !(std::fabs(offset_m) <= budget_m);
-}
-
-bool isSteeperThan(const GridPoint& a, const GridPoint& b, const GridPoint& c, double metres_per_col,
-                   double metres_per_row, double max_slope) {
-  const double ux = (b.col - a.col) * metres_per_col, uy = (b.row - a.row) * metres_per_row;
-  const double vx = (c.col - a.col) * metres_per_col, vy = (c.row - a.row) * metres_per_row;
-  const double det = ux * vy - uy * vx;
-  if (det == 0) return true;
-  const double dz1 = b.height_m - a.height_m, dz2 = c.height_m - a.height_m;
-  const double gx = dz1 * vy - dz2 * uy, gy = dz2 * ux - dz1 * vx;  // the gradient times det
-  return gx * gx + gy * gy > max_slope * max_slope * det * det;
-}
-
-bool quadricMinimum(const Quadric& q, std::array<double, 3>& point) {
-  const double a00 = q[0], a01 = q[1], a02 = q[2], a11 = q[4], a12 = q[5], a22 = q[7];
-  const double b0 = -q[3], b1 = -q[6], b2 = -q[8];
-  const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
-  const double det = a00 * c00 + a01 * c01 + a02 * c02;
-  const double trace = a00 + a11 + a22;
-  if (!(std::fabs(det) > 1e-12 * trace * trace * trace)) return false;
-  const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-  point = {(c00 * b0 + c01 * b1 + c02 * b2) / det, (c01 * b0 + c11 * b1 + c12 * b2) / det,
-           (c02 * b0 + c12 * b1 + c22 * b2) / det};
-  return true;
-}
-
-std::optional<double> segmentMinimum(const Quadric& q, const std::array<double, 3>& p0,
-                                     const std::array<double, 3>& d) {
-  const double qa = q[0] * d[0] * d[0] + 2 * q[1] * d[0] * d[1] + 2 * q[2] * d[0] * d[2] + q[4] * d[1] * d[1] +
-                    2 * q[5] * d[1] * d[2] + q[7] * d[2] * d[2];  // (d, 0)^T Q (d, 0)
-  const double qb = 2 * (q[0] * p0[0] * d[0] + q[1] * (p0[0] * d[1] + p0[1] * d[0]) +
-                         q[2] * (p0[0] * d[2] + p0[2] * d[0]) + q[4] * p0[1] * d[1] +
-                         q[5] * (p0[1] * d[2] + p0[2] * d[1]) + q[7] * p0[2] * d[2] + q[3] * d[0] +
-                         q[6] * d[1] + q[8] * d[2]);  // 2 (p0, 1)^T Q (d, 0)
-  if (!(qa > 0)) return std::nullopt;
-  const double t = -qb / (2 * qa);
-  if (!(t > 0 && t < 1)) return std::nullopt;
-  return t;
 }
 
 }  // namespace cluster_collapse

@@ -229,7 +229,7 @@ constexpr std::array<const char*, kGroupCount> kGroupNames = {"TIN", "partition"
                                                               "assign + write", "report + check", "other"};
 constexpr const char* kGroupRule =
     "TIN: stages starting with \"TIN\"; partition: \"level N: clusters\"; simplify: \"level N: simplifying ...\"; "
-    "measure: \"level N: measuring\" and placing the pixels on the globe; assign + write: assigning clusters to "
+    "measure: \"level N: measuring\" or \"placing vertices\" and placing the pixels on the globe; assign + write: assigning clusters to "
     "tiles, writing tiles; report + check: every stage after writing tiles; other: the rest (reading the DEM...)";
 
 // `after_writing`: a "writing tiles" stage has ended before this one.
@@ -239,7 +239,9 @@ StageGroup groupOf(const std::string& stage, bool after_writing) {
   if (stage.starts_with("level ")) {
     if (stage.find(": clusters") != std::string::npos) return kPartition;
     if (stage.find(": simplifying") != std::string::npos) return kSimplify;
-    if (stage.find(": measuring") != std::string::npos) return kMeasure;
+    if (stage.find(": measuring") != std::string::npos || stage.find(": placing vertices") != std::string::npos) {
+      return kMeasure;
+    }
   }
   if (stage.starts_with("placing the DEM")) return kMeasure;
   if (stage == "assigning clusters to tiles" || stage == "writing tiles") return kAssignWrite;
