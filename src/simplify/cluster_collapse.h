@@ -46,6 +46,10 @@ struct InputTopology {
   std::vector<std::uint32_t> leaving_start, leaving;
 };
 
+// Every corner's opposite and the corners leaving each vertex. Throws Error(Input) for an edge
+// in more than two triangles or run twice in the same direction.
+InputTopology buildTopology(const TinMesh& mesh);
+
 // The level to simplify, as simplifyClusters prepared it.
 struct LevelInput {
   const DemGrid* dem = nullptr;
@@ -60,15 +64,17 @@ struct LevelInput {
 };
 
 // What one cluster hands to the assembly.
+// A symmetric 4x4 quadric (Garland and Heckbert): xx xy xz xw yy yz yw zz zw ww.
+using Quadric = std::array<double, 10>;
+
 struct ClusterOutput {
   std::vector<std::uint32_t> triangles;                    // input vertex indices, 3 per triangle
   std::vector<std::pair<std::uint32_t, GridPoint>> moved;  // surviving vertices that moved
+  // The native engine, for a part of a split cluster: every surviving vertex's quadric.
+  std::vector<std::pair<std::uint32_t, Quadric>> quadrics;
   std::size_t refused_for_error = 0;
   std::size_t refused_for_flip = 0;
 };
-
-// A symmetric 4x4 quadric (Garland and Heckbert): xx xy xz xw yy yz yw zz zw ww.
-using Quadric = std::array<double, 10>;
 
 // The plane with unit normal n through point p, as a quadric: its value at a point is the
 // squared distance to the plane.

@@ -88,15 +88,27 @@ struct ClusterArrays {
   std::vector<PlacedPoint> placed_points = std::vector<PlacedPoint>(65536);
 };
 
+// How a cluster is loaded besides its faces: for a part of a split cluster, and for the whole
+// of it after its parts.
+struct ClusterSetup {
+  const GridPoint* origin = nullptr;  // of the metres frame (default: the first face's first vertex)
+  double edge_ratio = 0;              // the stop rule's ratio (0: SimplifyOptions::edge_ratio)
+  std::size_t initial_edges = 0;      // the stop rule's initial count (0: the cluster's own)
+  const std::vector<Quadric>* quadrics = nullptr;  // per input vertex, instead of its faces' planes
+  bool keep_quadrics = false;         // hand every survivor's quadric to the output
+};
+
 class ClusterCollapser {
  public:
   ClusterCollapser(const LevelInput& in, const std::vector<std::uint8_t>& locked_vertex, ClusterArrays& arrays)
       : in_(in), options_(*in.options), locked_vertex_(locked_vertex), a_(arrays) {}
 
-  ClusterOutput simplify(std::int32_t cluster, const std::uint32_t* faces_begin, const std::uint32_t* faces_end) {
-    load(cluster, faces_begin, faces_end);
+  ClusterOutput simplify(std::int32_t cluster, const std::uint32_t* faces_begin, const std::uint32_t* faces_end,
+                         const ClusterSetup& setup = {}) {
+    edge_ratio_ = setup.edge_ratio > 0 ? setup.edge_ratio : options_.edge_ratio;
+    load(cluster, faces_begin, faces_end, setup);
     ClusterOutput out;
-    if (options_.edge_ratio < 1) collapse(out);
+    if (edge_ratio_ < 1) collapse(out);
     out.triangles.reserve(3 * live_triangles_);
     const std::size_t triangles = a_.alive.size();
     for (std::size_t t = 0; t < triangles; ++t) {
@@ -111,12 +123,19 @@ class ClusterCollapser {
         out.moved.emplace_back(a_.identity[l], g);
       }
     }
+    if (setup.keep_quadrics) {
+      for (std::size_t l = 0; l < a_.identity.size(); ++l) {
+        if (a_.removed[l]) continue;
+        out.quadrics.emplace_back(a_.identity[l], a_.quadric[l]);
+      }
+    }
     for (const std::uint32_t v : a_.identity) a_.local_of_vertex[v] = kNone;
     return out;
   }
 
  private:
-  void load(std::int32_t cluster, const std::uint32_t* faces_begin, const std::uint32_t* faces_end) {
+  void load(std::int32_t cluster, const std::uint32_t* faces_begin, const std::uint32_t* faces_end,
+            const ClusterSetup& setup) {
     const TinMesh& mesh = *in_.mesh;
     const std::vector<std::uint32_t>& opposite = in_.topology->opposite_corner;
     const std::vector<std::int32_t>& cluster_of_face = *in_.cluster_of_face;
@@ -139,14 +158,15 @@ class ClusterCollapser {
     const std::size_t vertices = a_.identity.size(), triangles = a_.corners.size() / 3;
     live_triangles_ = triangles;
     edges_ = (a_.corners.size() + border_halfedges) / 2;
-    initial_edges_ = edges_;
+    initial_edges_ = setup.initial_edges > 0 ? setup.initial_edges : edges_;
     a_.alive.assign(triangles, 1);
+    a_.removed.assign(vertices, 0);
     a_.grid.resize(vertices);
     a_.metres.resize(vertices);
     a_.locked.resize(vertices);
     a_.quadric.assign(vertices, Quadric{});
     if (options_.globe) a_.ecef.resize(vertices);
-    origin_ = mesh.vertices[a_.identity[0]];
+    origin_ = setup.origin ? *setup.origin : mesh.vertices[a_.identity[0]];
     const GridPoint& origin = origin_;
     for (std::size_t l = 0; l < vertices; ++l) {
       const std::uint32_t v = a_.identity[l];
@@ -156,6 +176,10 @@ class ClusterCollapser {
                       g.height_m - origin.height_m};
       a_.locked[l] = locked_vertex_[v];
       if (options_.globe) a_.ecef[l] = options_.vertex_ecef[v];
+    }
+    if (setup.quadrics) {
+      for (std::size_t l = 0; l < vertices; ++l) a_.quadric[l] = (*setup.quadrics)[a_.identity[l]];
+      return;
     }
     // Plane quadrics with unit normals (as CGAL's GarlandHeckbert_plane_policies); a border
     // needs no plane of its own since its vertices never move.
@@ -179,7 +203,7 @@ class ClusterCollapser {
 
   // The stop rule of CGAL's Count_ratio_stop_predicate: collapse while edges / initial >= ratio.
   bool wantsMore() const {
-    return static_cast<double>(edges_) >= options_.edge_ratio * static_cast<double>(initial_edges_);
+    return static_cast<double>(edges_) >= edge_ratio_ * static_cast<double>(initial_edges_);
   }
 
   std::array<double, 3> metresOf(const GridPoint& g) const {
@@ -544,8 +568,64 @@ class ClusterCollapser {
   const std::vector<std::uint8_t>& locked_vertex_;
   ClusterArrays& a_;
   std::size_t edges_ = 0, initial_edges_ = 0, live_triangles_ = 0;
+  double edge_ratio_ = 0.5;
   GridPoint origin_;
 };
+
+// Large clusters at coarse levels (a few clusters joined over whole tiles) would leave cores
+// idle: a cluster holding more than 1/kSplitShare of the level's faces (and at least
+// kMinSplitFaces) is simplified in parts of about 1/(2 kSplitShare) of them, cut by recursive
+// bisection of the faces' centroids. The parts run in parallel with the seams between them
+// locked, each to kPartSlack more than the cluster's edge ratio; then the whole cluster runs
+// again from their result, seams free, with every vertex's accumulated quadric, to the
+// cluster's own stop: its greedy order takes the seams' dense collapses first. Which clusters
+// split depends on the level alone, not on the threads.
+constexpr std::size_t kSplitShare = 8;
+constexpr std::size_t kMinSplitFaces = 8192;
+constexpr double kPartSlack = 0.05;
+
+// Cuts faces[0 .. count) into `parts` runs of near-equal size, by recursive bisection of
+// their centroids (col, row) across the longer side of their box, ties by face index.
+void bisectFaces(std::uint32_t* faces, std::size_t count, std::size_t parts,
+                 const std::vector<std::array<double, 2>>& centroid, std::vector<std::uint32_t>& part_sizes) {
+  if (parts <= 1 || count < 2) {
+    part_sizes.push_back(static_cast<std::uint32_t>(count));
+    return;
+  }
+  double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+  for (std::size_t i = 0; i < count; ++i) {
+    for (int k = 0; k < 2; ++k) {
+      lo[k] = std::min(lo[k], centroid[faces[i]][k]);
+      hi[k] = std::max(hi[k], centroid[faces[i]][k]);
+    }
+  }
+  const int axis = hi[0] - lo[0] >= hi[1] - lo[1] ? 0 : 1;
+  const std::size_t left_parts = parts / 2;
+  const std::size_t left = count * left_parts / parts;
+  std::nth_element(faces, faces + left, faces + count, [&](std::uint32_t a, std::uint32_t b) {
+    return centroid[a][axis] != centroid[b][axis] ? centroid[a][axis] < centroid[b][axis] : a < b;
+  });
+  std::sort(faces, faces + left);  // each part's faces in input order
+  std::sort(faces + left, faces + count);
+  bisectFaces(faces, left, left_parts, centroid, part_sizes);
+  bisectFaces(faces + left, count - left, parts - left_parts, centroid, part_sizes);
+}
+
+// The edges of a set of faces for the stop rule: every edge once (corners plus the half-edges
+// whose other side is not in the set, over two).
+std::size_t edgesOf(const LevelInput& in, std::int32_t cluster, const std::uint32_t* begin, const std::uint32_t* end) {
+  const std::vector<std::uint32_t>& opposite = in.topology->opposite_corner;
+  const std::vector<std::int32_t>& cluster_of_face = *in.cluster_of_face;
+  std::size_t corners = 0, border = 0;
+  for (const std::uint32_t* f = begin; f != end; ++f) {
+    for (std::uint32_t k = 0; k < 3; ++k) {
+      const std::uint32_t o = opposite[3 * *f + k];
+      ++corners;
+      if (o == kNone || cluster_of_face[o / 3] != cluster) ++border;
+    }
+  }
+  return (corners + border) / 2;
+}
 
 }  // namespace
 
@@ -554,17 +634,175 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
   const std::vector<std::uint32_t>& cluster_start = *in.cluster_start;
   const std::vector<std::uint32_t>& faces_by_cluster = *in.faces_by_cluster;
   const std::size_t clusters = cluster_start.size() - 1;
-  const std::size_t vertex_count = in.mesh->vertices.size();
+  const TinMesh& mesh = *in.mesh;
+  const std::size_t vertex_count = mesh.vertices.size();
   tbb::enumerable_thread_specific<ClusterArrays> per_thread([vertex_count] {
     ClusterArrays arrays;
     arrays.local_of_vertex.assign(vertex_count, kNone);
     return arrays;
   });
   std::vector<ClusterOutput> outputs(clusters);
-  forEachClusterLargestFirst(cluster_start, [&](std::uint32_t c) {
-    ClusterCollapser cluster(in, locked, per_thread.local());
-    outputs[c] = cluster.simplify(static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
+
+  // Which clusters split, and their parts as units of their own (ids from `clusters` on).
+  const std::size_t level_faces = faces_by_cluster.size();
+  const std::size_t split_above = std::max(kMinSplitFaces, level_faces / kSplitShare);
+  const std::size_t part_faces = std::max<std::size_t>(1, level_faces / (2 * kSplitShare));
+  std::vector<std::uint32_t> split;  // cluster ids
+  for (std::uint32_t c = 0; c < clusters; ++c) {
+    if (cluster_start[c + 1] - cluster_start[c] > split_above) split.push_back(c);
+  }
+  if (split.empty()) {
+    forEachClusterLargestFirst(cluster_start, [&](std::uint32_t c) {
+      ClusterCollapser cluster(in, locked, per_thread.local());
+      outputs[c] = cluster.simplify(static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
+                                    faces_by_cluster.data() + cluster_start[c + 1]);
+    });
+    return outputs;
+  }
+  std::vector<std::int32_t> unit_of_face = *in.cluster_of_face;
+  std::vector<std::uint32_t> unit_start, unit_faces, unit_cluster;  // units: clusters that stay whole, then parts
+  std::vector<std::uint8_t> is_split(clusters, 0);
+  for (const std::uint32_t c : split) is_split[c] = 1;
+  for (std::uint32_t c = 0; c < clusters; ++c) {
+    if (is_split[c]) continue;
+    unit_start.push_back(static_cast<std::uint32_t>(unit_faces.size()));
+    unit_faces.insert(unit_faces.end(), faces_by_cluster.begin() + cluster_start[c],
+                      faces_by_cluster.begin() + cluster_start[c + 1]);
+    unit_cluster.push_back(c);
+  }
+  std::vector<std::array<double, 2>> centroid(mesh.triangleCount());
+  std::vector<std::vector<std::uint32_t>> units_of_split(clusters);
+  for (const std::uint32_t c : split) {
+    std::vector<std::uint32_t> faces(faces_by_cluster.begin() + cluster_start[c], faces_by_cluster.begin() + cluster_start[c + 1]);
+    for (const std::uint32_t f : faces) {
+      const GridPoint& a = mesh.vertices[mesh.triangle_indices[3 * f]];
+      const GridPoint& b = mesh.vertices[mesh.triangle_indices[3 * f + 1]];
+      const GridPoint& d = mesh.vertices[mesh.triangle_indices[3 * f + 2]];
+      centroid[f] = {a.col + b.col + d.col, a.row + b.row + d.row};
+    }
+    std::vector<std::uint32_t> sizes;
+    bisectFaces(faces.data(), faces.size(), (faces.size() + part_faces - 1) / part_faces, centroid, sizes);
+    std::size_t offset = 0;
+    for (const std::uint32_t size : sizes) {
+      const auto unit = static_cast<std::int32_t>(clusters + unit_start.size());
+      units_of_split[c].push_back(static_cast<std::uint32_t>(unit_start.size()));
+      unit_start.push_back(static_cast<std::uint32_t>(unit_faces.size()));
+      for (std::size_t i = offset; i < offset + size; ++i) {
+        unit_faces.push_back(faces[i]);
+        unit_of_face[faces[i]] = unit;
+      }
+      unit_cluster.push_back(c);
+      offset += size;
+    }
+  }
+  unit_start.push_back(static_cast<std::uint32_t>(unit_faces.size()));
+
+  // 1. Whole clusters and parts, the seams between parts locked.
+  LevelInput units = in;
+  units.cluster_of_face = &unit_of_face;
+  const std::vector<std::uint8_t> locked_units = lockedVertices(units);
+  std::vector<ClusterOutput> unit_outputs(unit_start.size() - 1);
+  std::vector<GridPoint> split_origin(clusters);
+  for (const std::uint32_t c : split) split_origin[c] = mesh.vertices[mesh.triangle_indices[3 * faces_by_cluster[cluster_start[c]]]];
+  forEachClusterLargestFirst(unit_start, [&](std::uint32_t unit) {
+    const std::uint32_t c = unit_cluster[unit];
+    ClusterCollapser collapser(units, locked_units, per_thread.local());
+    const std::uint32_t* begin = unit_faces.data() + unit_start[unit];
+    const std::uint32_t* end = unit_faces.data() + unit_start[unit + 1];
+    if (!is_split[c]) {
+      outputs[c] = collapser.simplify(static_cast<std::int32_t>(c), begin, end);
+      return;
+    }
+    ClusterSetup setup;
+    setup.origin = &split_origin[c];
+    setup.edge_ratio = std::min(1.0, in.options->edge_ratio + kPartSlack);
+    setup.keep_quadrics = true;
+    unit_outputs[unit] = collapser.simplify(static_cast<std::int32_t>(clusters + unit), begin, end, setup);
+  });
+
+  // 2. Each split cluster whole again, from its parts' result.
+  std::vector<std::uint32_t> split_start{0};
+  for (const std::uint32_t c : split) split_start.push_back(split_start.back() + cluster_start[c + 1] - cluster_start[c]);
+  forEachClusterLargestFirst(split_start, [&](std::uint32_t s) {
+    const std::uint32_t c = split[s];
+    // The cluster as it is now, as a mesh of its own (vertices in order of first use).
+    TinMesh now;
+    std::vector<std::uint32_t> identity;  // now's vertex -> level vertex
+    std::vector<std::uint32_t> local(vertex_count, kNone);
+    std::vector<Quadric> quadric;
+    std::vector<std::uint8_t> now_locked;
+    ClusterOutput& out = outputs[c];
+    std::vector<GridPoint> position_of_moved;
+    std::vector<std::uint32_t> moved_local;
+    for (const std::uint32_t unit : units_of_split[c]) {
+      const ClusterOutput& part = unit_outputs[unit];
+      out.refused_for_error += part.refused_for_error;
+      out.refused_for_flip += part.refused_for_flip;
+      for (const std::uint32_t v : part.triangles) {
+        if (local[v] == kNone) {
+          local[v] = static_cast<std::uint32_t>(identity.size());
+          identity.push_back(v);
+          now.vertices.push_back(mesh.vertices[v]);
+          quadric.push_back(Quadric{});
+          now_locked.push_back(locked[v]);
+        }
+        now.triangle_indices.push_back(local[v]);
+      }
+    }
+    for (const std::uint32_t unit : units_of_split[c]) {
+      const ClusterOutput& part = unit_outputs[unit];
+      for (const auto& [v, g] : part.moved) {
+        if (local[v] != kNone) now.vertices[local[v]] = g;
+      }
+      for (const auto& [v, q] : part.quadrics) {
+        if (local[v] != kNone) addTo(quadric[local[v]], q);
+      }
+    }
+    const InputTopology topology = buildTopology(now);
+    std::vector<EcefPoint> ecef;
+    SimplifyOptions options = *in.options;
+    if (options.globe) {
+      ecef.resize(identity.size());
+      for (std::size_t l = 0; l < identity.size(); ++l) {
+        const GridPoint& g = now.vertices[l];
+        const GridPoint& was = mesh.vertices[identity[l]];
+        const bool moved = g.col != was.col || g.row != was.row || g.height_m != was.height_m;
+        ecef[l] = moved ? options.globe->place(g) : in.options->vertex_ecef[identity[l]];
+      }
+      options.vertex_ecef = ecef;
+    }
+    const std::vector<std::int32_t> whole(now.triangleCount(), 0);
+    std::vector<std::uint32_t> all_faces(now.triangleCount());
+    for (std::uint32_t f = 0; f < all_faces.size(); ++f) all_faces[f] = f;
+    const std::vector<std::uint64_t> no_constraints;  // their vertices are locked already
+    LevelInput again = in;
+    again.mesh = &now;
+    again.options = &options;
+    again.topology = &topology;
+    again.cluster_of_face = &whole;
+    again.constrained_keys = &no_constraints;
+    ClusterSetup setup;
+    setup.origin = &split_origin[c];
+    setup.initial_edges = edgesOf(in, static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
                                   faces_by_cluster.data() + cluster_start[c + 1]);
+    setup.quadrics = &quadric;
+    ClusterCollapser collapser(again, now_locked, per_thread.local());
+    ClusterOutput result = collapser.simplify(0, all_faces.data(), all_faces.data() + all_faces.size(), setup);
+    out.refused_for_error += result.refused_for_error;
+    out.refused_for_flip += result.refused_for_flip;
+    out.triangles.reserve(result.triangles.size());
+    for (const std::uint32_t l : result.triangles) out.triangles.push_back(identity[l]);
+    std::vector<GridPoint> final_position = now.vertices;
+    for (const auto& [l, g] : result.moved) final_position[l] = g;
+    std::vector<std::uint8_t> survives(identity.size(), 0);
+    for (const std::uint32_t l : result.triangles) survives[l] = 1;
+    for (std::uint32_t l = 0; l < identity.size(); ++l) {
+      const GridPoint& g = final_position[l];
+      const GridPoint& was = mesh.vertices[identity[l]];
+      if (survives[l] && (g.col != was.col || g.row != was.row || g.height_m != was.height_m)) {
+        out.moved.emplace_back(identity[l], g);
+      }
+    }
   });
   return outputs;
 }

@@ -21,62 +21,6 @@ std::string edgeText(std::uint64_t key) {
   return "(" + std::to_string(key >> 32) + ", " + std::to_string(key & 0xffffffffu) + ")";
 }
 
-// The corners leaving each vertex (CSR): corner c runs from its vertex to the next corner's.
-// An edge's other corner is then among the few leaving its far end: linear time, where a sort
-// of every directed edge took a quarter of a level's simplification.
-InputTopology buildTopology(const TinMesh& mesh) {
-  const std::vector<std::uint32_t>& idx = mesh.triangle_indices;
-  const std::size_t corners = idx.size();
-  TERRATILES_ASSERT(corners < kNone);
-  InputTopology topology;
-  std::vector<std::uint32_t>& start = topology.leaving_start;
-  std::vector<std::uint32_t>& leaving = topology.leaving;
-  start.assign(mesh.vertices.size() + 1, 0);
-  for (std::uint32_t c = 0; c < corners; ++c) ++start[idx[c] + 1];
-  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) start[v + 1] += start[v];
-  leaving.resize(corners);
-  std::vector<std::uint32_t> end(corners);  // per entry of `leaving`: the vertex it runs to
-  {
-    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (std::uint32_t t = 0; 3 * t < corners; ++t) {
-      for (std::uint32_t k = 0; k < 3; ++k) {
-        const std::uint32_t c = 3 * t + k, i = fill[idx[c]]++;
-        leaving[i] = c;  // in corner order
-        end[i] = idx[3 * t + (k == 2 ? 0 : k + 1)];
-      }
-    }
-  }
-  topology.opposite_corner.assign(corners, kNone);
-  const std::size_t vertices = mesh.vertices.size();
-  for (std::uint32_t u = 0; u < vertices; ++u) {
-    for (std::uint32_t e = start[u]; e < start[u + 1]; ++e) {
-      const std::uint32_t c = leaving[e], v = end[e];
-      // Corners running u -> v (c among them, in corner order) and v -> u.
-      std::uint32_t along[2], against = kNone;
-      std::size_t same = 0, reverse = 0;
-      for (std::uint32_t i = start[u]; i < start[u + 1]; ++i) {
-        if (end[i] == v && same++ < 2) along[same - 1] = leaving[i];
-      }
-      for (std::uint32_t i = start[v]; i < start[v + 1]; ++i) {
-        if (end[i] == u && reverse++ == 0) against = leaving[i];
-      }
-      if (same + reverse > 2) {
-        throw Error(ErrorCode::Input,
-                    "simplifyClusters: edge " + edgeText(edgeKey(u, v)) + " is in " + std::to_string(same + reverse) +
-                        " triangles; expected an edge-manifold mesh (at most two triangles per edge)");
-      }
-      if (same == 2) {
-        throw Error(ErrorCode::Input,
-                    "simplifyClusters: triangles " + std::to_string(along[0] / 3) + " and " +
-                        std::to_string(along[1] / 3) + " run edge " + edgeText(edgeKey(u, v)) +
-                        " in the same direction; expected every triangle counter-clockwise seen from above");
-      }
-      if (reverse == 1) topology.opposite_corner[c] = against;
-    }
-  }
-  return topology;
-}
-
 bool hasEdge(const TinMesh& mesh, const InputTopology& topology, std::uint32_t a, std::uint32_t b) {
   const auto leavesTo = [&](std::uint32_t from, std::uint32_t to) {
     for (std::uint32_t i = topology.leaving_start[from]; i < topology.leaving_start[from + 1]; ++i) {
@@ -147,6 +91,63 @@ void validateMesh(const TinMesh& mesh, const std::vector<std::int32_t>& cluster_
 }
 
 }  // namespace
+
+// The corners leaving each vertex (CSR): corner c runs from its vertex to the next corner's.
+// An edge's other corner is then among the few leaving its far end: linear time, where a sort
+// of every directed edge took a quarter of a level's simplification.
+InputTopology buildTopology(const TinMesh& mesh) {
+  const std::vector<std::uint32_t>& idx = mesh.triangle_indices;
+  const std::size_t corners = idx.size();
+  TERRATILES_ASSERT(corners < kNone);
+  InputTopology topology;
+  std::vector<std::uint32_t>& start = topology.leaving_start;
+  std::vector<std::uint32_t>& leaving = topology.leaving;
+  start.assign(mesh.vertices.size() + 1, 0);
+  for (std::uint32_t c = 0; c < corners; ++c) ++start[idx[c] + 1];
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) start[v + 1] += start[v];
+  leaving.resize(corners);
+  std::vector<std::uint32_t> end(corners);  // per entry of `leaving`: the vertex it runs to
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::uint32_t t = 0; 3 * t < corners; ++t) {
+      for (std::uint32_t k = 0; k < 3; ++k) {
+        const std::uint32_t c = 3 * t + k, i = fill[idx[c]]++;
+        leaving[i] = c;  // in corner order
+        end[i] = idx[3 * t + (k == 2 ? 0 : k + 1)];
+      }
+    }
+  }
+  topology.opposite_corner.assign(corners, kNone);
+  const std::size_t vertices = mesh.vertices.size();
+  for (std::uint32_t u = 0; u < vertices; ++u) {
+    for (std::uint32_t e = start[u]; e < start[u + 1]; ++e) {
+      const std::uint32_t c = leaving[e], v = end[e];
+      // Corners running u -> v (c among them, in corner order) and v -> u.
+      std::uint32_t along[2], against = kNone;
+      std::size_t same = 0, reverse = 0;
+      for (std::uint32_t i = start[u]; i < start[u + 1]; ++i) {
+        if (end[i] == v && same++ < 2) along[same - 1] = leaving[i];
+      }
+      for (std::uint32_t i = start[v]; i < start[v + 1]; ++i) {
+        if (end[i] == u && reverse++ == 0) against = leaving[i];
+      }
+      if (same + reverse > 2) {
+        throw Error(ErrorCode::Input,
+                    "simplifyClusters: edge " + edgeText(edgeKey(u, v)) + " is in " + std::to_string(same + reverse) +
+                        " triangles; expected an edge-manifold mesh (at most two triangles per edge)");
+      }
+      if (same == 2) {
+        throw Error(ErrorCode::Input,
+                    "simplifyClusters: triangles " + std::to_string(along[0] / 3) + " and " +
+                        std::to_string(along[1] / 3) + " run edge " + edgeText(edgeKey(u, v)) +
+                        " in the same direction; expected every triangle counter-clockwise seen from above");
+      }
+      if (reverse == 1) topology.opposite_corner[c] = against;
+    }
+  }
+  return topology;
+}
+
 
 
 // True when some valid DEM pixel the triangle covers is more than budget_m away from it. Same

@@ -455,6 +455,38 @@ TEST_SUITE("simplify") {
     }
   }
 
+  TEST_CASE("a cluster too large for one core is simplified in parts and keeps its quality") {
+    // One cluster holding the whole level: the native engine cuts it into parts that run in
+    // parallel with their seams locked, then simplifies it whole from their result.
+    const RealLevel& level = interlaken();
+    Partition one;
+    one.cluster_of_face.assign(level.tin.triangleCount(), 0);
+    one.cluster_count = 1;
+    REQUIRE(level.tin.triangleCount() > 2 * 8192);
+    const SimplifyOptions native_options = optionsFor(Simplifier::Native, level, 5.0);
+    auto run = [&](int threads) {
+      tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
+      return simplify(level.dem, level.tin, one, {}, native_options);
+    };
+    const ClusterSimplification native = run(2);
+    const LevelReport report = checkLevel(level.dem, level.tin, one, {}, native, native_options.edge_ratio);
+    CHECK(report.after.max_error_m <= 5.0);
+    const ClusterSimplification serial = run(1);
+    CHECK(std::equal(native.mesh.vertices.begin(), native.mesh.vertices.end(), serial.mesh.vertices.begin(),
+                     serial.mesh.vertices.end(), sameBits));
+    CHECK(native.mesh.triangle_indices == serial.mesh.triangle_indices);
+    const ClusterSimplification cgal = simplify(level.dem, level.tin, one, {}, optionsFor(Simplifier::Cgal, level, 5.0));
+    const TinErrorStatistics cgal_error = measureTin(level.dem, cgal.mesh);
+    MESSAGE("one cluster, budget 5 m: triangles native " << native.mesh.triangleCount() << ", cgal "
+                                                         << cgal.mesh.triangleCount() << "; max error native "
+                                                         << report.after.max_error_m << " m, cgal "
+                                                         << cgal_error.max_error_m << " m");
+    CHECK(static_cast<double>(native.mesh.triangleCount()) <= 1.05 * static_cast<double>(cgal.mesh.triangleCount()));
+    // Not stuck at the parts' stop: the whole cluster reaches its own edge ratio.
+    const double ratio = static_cast<double>(report.output_edges) / static_cast<double>(report.input_edges);
+    CHECK(ratio < report.expected_ratio + 0.02);
+  }
+
   TEST_CASE("split clusters pinched clusters single triangles and empty ids are simplified") {
     for (const Simplifier engine : kEngines) {
       CAPTURE(engineName(engine));
