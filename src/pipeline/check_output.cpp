@@ -21,6 +21,10 @@
 #include <random>
 #include <sstream>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
 #include "formats/gltf/read_glb.h"
@@ -28,6 +32,7 @@
 #include "src/geo/dem_on_globe.h"
 #include "src/geo/geoid.h"
 #include "src/pipeline/drawn_tiles.h"
+#include "src/pipeline/largest_first.h"
 #include "src/tiling/tile_key.h"
 #include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"
@@ -152,6 +157,69 @@ class ToDemCrs {
   tbb::enumerable_thread_specific<std::unique_ptr<OGRCoordinateTransformation>> per_thread_;
 };
 
+#if defined(__x86_64__)
+const bool kHasAvx2 = __builtin_cpu_supports("avx2");
+
+// (p.col - col) * (q.row - row) - (p.row - row) * (q.col - col), four columns at a time.
+__attribute__((target("avx2"))) inline __m256d weightTerm(const GridPoint& p, const GridPoint& q, __m256d cols,
+                                                          __m256d rows) {
+  return _mm256_sub_pd(
+      _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(p.col), cols), _mm256_sub_pd(_mm256_set1_pd(q.row), rows)),
+      _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(p.row), rows), _mm256_sub_pd(_mm256_set1_pd(q.col), cols)));
+}
+
+// forEachCoveredPixel's test of four pixels (columns col .. col + 3 of `row`) as its scalar
+// code computes it, operation for operation (AVX2 has no fused multiply-add): bit k set when
+// column col + k is covered.
+__attribute__((target("avx2"))) unsigned covered4(const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                                                  double area2, double eps, double col, double row) {
+  const __m256d cols = _mm256_add_pd(_mm256_set1_pd(col), _mm256_set_pd(3, 2, 1, 0));
+  const __m256d rows = _mm256_set1_pd(row);
+  const __m256d area = _mm256_set1_pd(area2), size = _mm256_set1_pd(std::fabs(area2));
+  const __m256d wa = _mm256_div_pd(weightTerm(b, c, cols, rows), area), wb = _mm256_div_pd(weightTerm(c, a, cols, rows), area);
+  const __m256d wc = _mm256_sub_pd(_mm256_sub_pd(_mm256_set1_pd(1.0), wa), wb);
+  const __m256d below = _mm256_set1_pd(-eps);
+  const __m256d outside =
+      _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(_mm256_mul_pd(wa, size), below, _CMP_LT_OQ),
+                                _mm256_cmp_pd(_mm256_mul_pd(wb, size), below, _CMP_LT_OQ)),
+                   _mm256_cmp_pd(_mm256_mul_pd(wc, size), below, _CMP_LT_OQ));
+  return static_cast<unsigned>(~_mm256_movemask_pd(outside)) & 15u;
+}
+#endif
+
+// forEachCoveredPixel(dem, a, b, c, ...): the valid (not nodata) pixels it visits, appended
+// to `out` in its order.
+void coveredValidPixels(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                        std::vector<std::uint32_t>& out) {
+#if defined(__x86_64__)
+  if (kHasAvx2) {
+    // forEachCoveredPixel's box and tolerance.
+    const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+    if (area2 == 0) return;
+    const double eps = 1e-9 * std::fabs(area2);
+    const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
+    const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
+    const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
+    const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
+    for (int row = min_row; row <= max_row; ++row) {
+      for (int col = min_col; col <= max_col; col += 4) {
+        unsigned inside = covered4(a, b, c, area2, eps, col, row);
+        if (max_col - col < 3) inside &= (1u << (max_col - col + 1)) - 1;
+        for (; inside != 0; inside &= inside - 1) {
+          const std::size_t pixel = dem.index(col + std::countr_zero(inside), row);
+          if (!std::isnan(dem.heights_m[pixel])) out.push_back(static_cast<std::uint32_t>(pixel));
+        }
+      }
+    }
+    return;
+  }
+#endif
+  forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double) {
+    if (!std::isnan(dem.heights_m[pixel])) out.push_back(static_cast<std::uint32_t>(pixel));
+    return true;
+  });
+}
+
 // Per thread scratch for decodeAndMeasure, reused from tile to tile.
 struct DecodeScratch {
   std::vector<double> xs, ys, zs;
@@ -167,9 +235,9 @@ struct DecodeScratch {
 // Decodes a tile (see the header) and measures it: its outline, its coverage in the grid and
 // as drawn, its region, its drawn error against the DEM and against the finer zoom's surface
 // (adding its own to `surface`). Needs the finer zoom's surface complete, no other tile.
-void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* geoid, ToDemCrs& to_dem,
-                      double widest_step_m, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile,
-                      DecodeScratch& scratch) {
+void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelBoxes& boxes, const GeoidGrid* geoid,
+                      ToDemCrs& to_dem, double widest_step_m, const ZoomSurface* finer, ZoomSurface& surface,
+                      CheckTile& tile, DecodeScratch& scratch) {
   const DemGrid& dem = globe.dem();
   DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
   GlbMesh& mesh = decoded.mesh;
@@ -262,10 +330,7 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
   // long chord strays from its grid triangle by its bulge, far from a pole too).
   std::vector<std::uint32_t>& covered = tile.pixels;
   const auto rasterise = [&](const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-    forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double) {
-      if (!std::isnan(dem.heights_m[pixel])) covered.push_back(static_cast<std::uint32_t>(pixel));
-      return true;
-    });
+    coveredValidPixels(dem, a, b, c, covered);
   };
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
     const std::uint32_t corner[3] = {idx[t], idx[t + 1], idx[t + 2]};
@@ -306,7 +371,7 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const GeoidG
 
   // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them); the pixels
   // met join its coverage.
-  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface, &covered);
+  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface, &covered, &boxes);
 }
 
 // Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that
@@ -497,8 +562,12 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     geoid = readGeoidGrid(build.at("geoid").get<std::string>());
   }
   progress.endStage();
-  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  // The stage holds the transformation's set-up too (a few tenths of a second in PROJ).
+  progress.beginStage("placing the DEM's pixels on the globe", 0);
+  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr);
+  const PixelBoxes boxes(globe);
   ToDemCrs to_dem(dem);
+  progress.endStage();
   // The widest quantisation step any zoom used (an output without one: the lattice tolerance
   // alone bounds where a vertex is put back on its pixel centre).
   const double widest_step_m = build.value("position_step_m", 1e9);
@@ -534,24 +603,27 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
       const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
       surface.clear();
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, here.size(), 1),
-          [&](const tbb::blocked_range<std::size_t>& range) {
-            for (std::size_t k = range.begin(); k < range.end(); ++k) {
-              CheckTile& tile = tiles[here[k]];
-              decodeAndMeasure(dir, globe, geoid ? &*geoid : nullptr, to_dem, widest_step_m,
-                               zoom < max_zoom ? &finer : nullptr, surface, tile, scratch.local());
-              // Into the classes in the order tiles finish: the classes differ in their
-              // numbering only, every count made from them is the same.
-              const std::lock_guard<std::mutex> lock(classes_mutex);
-              if (zoom == max_zoom) {
-                for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
-              }
-              classes.add(here[k], tile.pixels);
-              tile.pixels = std::vector<std::uint32_t>();  // (= {} would keep its memory)
-            }
-          },
-          tbb::simple_partitioner());
+      // The largest files first (a tile's work grows with its size).
+      std::vector<std::size_t> order(here);
+      std::vector<std::uintmax_t> bytes(tiles.size(), 0);
+      for (const std::size_t i : here) {
+        std::error_code error;
+        bytes[i] = fs::file_size(dir / tiles[i].uri, error);
+      }
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) { return bytes[i] > bytes[j]; });
+      forEachLargestFirst(order, [&](std::size_t i) {
+        CheckTile& tile = tiles[i];
+        decodeAndMeasure(dir, globe, boxes, geoid ? &*geoid : nullptr, to_dem, widest_step_m,
+                         zoom < max_zoom ? &finer : nullptr, surface, tile, scratch.local());
+        // Into the classes in the order tiles finish: the classes differ in their numbering
+        // only, every count made from them is the same.
+        const std::lock_guard<std::mutex> lock(classes_mutex);
+        if (zoom == max_zoom) {
+          for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
+        }
+        classes.add(i, tile.pixels);
+        tile.pixels = std::vector<std::uint32_t>();  // (= {} would keep its memory)
+      });
       std::swap(finer, surface);
       progress.advance(here.size());
     }

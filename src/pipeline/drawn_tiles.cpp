@@ -1,11 +1,13 @@
 #include "src/pipeline/drawn_tiles.h"
 
 #include <GeographicLib/Geocentric.hpp>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
-#include <atomic>
+#include <limits>
 #include <numbers>
 
 #if defined(__x86_64__)
@@ -151,18 +153,127 @@ void pixelsMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const
   }
 }
 
+PixelBoxes::PixelBoxes(const DemOnGlobe& globe) : globe_(globe) {
+  const DemGrid& dem = globe.dem();
+  const std::int32_t bands = (dem.height + kBandRows - 1) / kBandRows;
+  bands_.resize(static_cast<std::size_t>(bands));
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  tbb::parallel_for(std::int32_t{0}, bands, [&](std::int32_t b) {
+    Band& band = bands_[static_cast<std::size_t>(b)];
+    double sin_low = kInfinity, sin_high = 0;
+    double row_low = kInfinity, row_high = -kInfinity, column_low = kInfinity, column_high = -kInfinity;
+    bool pole = false;
+    const double* up_z = globe.upZ();
+    for (std::int32_t row = b * kBandRows; row < std::min(dem.height, (b + 1) * kBandRows); ++row) {
+      pole = pole || globe.poleRow(row);
+      if (row < dem.height - 1) {
+        row_low = std::min(row_low, globe.rowSpacing(row));
+        row_high = std::max(row_high, globe.rowSpacing(row));
+      }
+      column_low = std::min(column_low, globe.columnSpacing(row));
+      column_high = std::max(column_high, globe.columnSpacing(row));
+      const std::size_t start = dem.index(0, row);
+      for (std::int32_t col = 0; col < dem.width; ++col) {
+        const double s = std::fabs(up_z[start + col]);
+        sin_low = std::min(sin_low, s);
+        sin_high = std::max(sin_high, s);
+      }
+    }
+    // As strayMargin computes it from a corner's sine: increasing in the sine.
+    const auto tanOf = [](double sin_lat) {
+      return std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
+    };
+    band.tan_lat_low = tanOf(sin_low);
+    band.tan_lat_high = tanOf(sin_high);
+    band.row_spacing_low_m = row_low;
+    band.row_spacing_high_m = row_high;
+    band.column_spacing_low_m = column_low;
+    band.column_spacing_high_m = column_high;
+    band.usable = !pole && row_low > 0 && std::isfinite(row_high) && column_low > 0 && std::isfinite(column_high) &&
+                  std::isfinite(band.tan_lat_low) && std::isfinite(band.tan_lat_high);
+  });
+}
+
+PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longest_edge_m, double shift_m) const {
+  const DemGrid& dem = globe_.dem();
+  double row_min = 1e300, row_max = -1e300, col_min = 1e300, col_max = -1e300;
+  for (const GridCorner& corner : corners) {
+    if (corner.at_pole) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+    row_min = std::min(row_min, corner.row);
+    row_max = std::max(row_max, corner.row);
+    col_min = std::min(col_min, corner.col);
+    col_max = std::max(col_max, corner.col);
+  }
+  if (!(col_min <= col_max) || !(row_min <= row_max)) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+  // strayMargin's rows (its corners' sines come from rows among them), by band; at least one
+  // of them has a row spacing (else its margin in rows is 0).
+  const auto first_row = static_cast<std::int32_t>(std::clamp(std::floor(row_min) - 1, 0.0, dem.height - 1.0));
+  const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
+  if (first_row >= dem.height - 1) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  double tan_low = kInfinity, tan_high = 0;
+  double row_low = kInfinity, row_high = 0, column_low = kInfinity, column_high = 0;
+  for (std::int32_t b = first_row / kBandRows; b <= last_row / kBandRows; ++b) {
+    const Band& band = bands_[static_cast<std::size_t>(b)];
+    if (!band.usable) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+    tan_low = std::min(tan_low, band.tan_lat_low);
+    tan_high = std::max(tan_high, band.tan_lat_high);
+    row_low = std::min(row_low, band.row_spacing_low_m);
+    row_high = std::max(row_high, band.row_spacing_high_m);
+    column_low = std::min(column_low, band.column_spacing_low_m);
+    column_high = std::max(column_high, band.column_spacing_high_m);
+  }
+  // strayMargin's arithmetic with the bounds in: each step is monotone, so its margins lie
+  // between these.
+  constexpr double kRadius_m = 6.3e6;  // strayMargin's
+  const auto marginOf = [&](double tan_lat) {
+    const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
+    return bulge_m + shift_m;
+  };
+  const double least_m = marginOf(tan_low), most_m = marginOf(tan_high);
+  const double least_rows = least_m / row_high, least_columns = least_m / column_high;
+  const double most_rows = most_m / row_low, most_columns = most_m / column_low;
+  if (!(least_rows >= 0 && least_columns >= 0 && most_rows < 1e9 && most_columns < 1e9)) {
+    return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+  }
+  // candidatePixels's box (no corner at a pole) for given margins.
+  const auto boxWith = [&](double margin_rows, double margin_cols) {
+    PixelBox out;
+    out.row0 = static_cast<std::int32_t>(std::max(0.0, std::ceil(row_min - margin_rows - 1e-9)));
+    out.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, std::floor(row_max + margin_rows + 1e-9)));
+    double first = std::ceil(col_min - margin_cols - 1e-9), last = std::floor(col_max + margin_cols + 1e-9);
+    if (last - first + 1 >= dem.width) {
+      first = 0;
+      last = dem.width - 1;
+    }
+    if (!globe_.wrapsLongitude()) {
+      first = std::max(first, 0.0);
+      last = std::min(last, dem.width - 1.0);
+    }
+    out.col0 = static_cast<std::int64_t>(first);
+    out.col1 = static_cast<std::int64_t>(last);
+    return out;
+  };
+  const PixelBox least = boxWith(least_rows, least_columns), most = boxWith(most_rows, most_columns);
+  if (least.row0 == most.row0 && least.row1 == most.row1 && least.col0 == most.col0 && least.col1 == most.col1) {
+    return least;
+  }
+  return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+}
+
 DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
                                   double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
-                                  std::vector<std::uint32_t>* met) {
+                                  std::vector<std::uint32_t>* met, const PixelBoxes* boxes) {
   DrawnTileMeasure measure;
   const DemGrid& dem = globe.dem();
   std::vector<PixelOffset> hits;
   for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
     const DrawnTriangle triangle(vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]);
     if (triangle.degenerate()) continue;
-    const PixelBox box =
-        candidatePixels(globe, {grid[indices[t]], grid[indices[t + 1]], grid[indices[t + 2]]}, triangle.longestEdge(), shift_m);
+    const std::array<GridCorner, 3> corners{grid[indices[t]], grid[indices[t + 1]], grid[indices[t + 2]]};
+    const PixelBox box = boxes ? boxes->box(corners, triangle.longestEdge(), shift_m)
+                               : candidatePixels(globe, corners, triangle.longestEdge(), shift_m);
     hits.clear();
     pixelsMeeting(globe, triangle, box, hits);
     for (const auto& [pixel, offset_m] : hits) {

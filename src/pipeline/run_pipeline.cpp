@@ -37,6 +37,7 @@
 #include "src/pipeline/report_maps.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/pipeline/drawn_tiles.h"
+#include "src/pipeline/largest_first.h"
 #include "src/simplify/simplify_clusters.h"
 #include "src/tin/measure_tin.h"
 #include "src/geo/dem_on_globe.h"
@@ -420,7 +421,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   progress.endStage();
   // Every pixel's DEM point on the globe and its vertical: every error is measured on the
   // surface a renderer draws, along these.
-  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  std::optional<DemOnGlobe> globe_storage;  // let go before the report's check, which places the DEM itself
+  const DemOnGlobe& globe = globe_storage.emplace(dem, geoid ? &*geoid : nullptr, &progress);
   progress.note("placement: " + to_wgs84.pathDescription());
   for (const std::string& warning : to_wgs84.warnings()) progress.note("warning: " + warning);
   progress.note(geoid ? "heights: orthometric, geoid " + geoid->name
@@ -626,15 +628,17 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     return out;
   };
   std::vector<GlbOptions> zoom_glb(zoom_count, glb);
+  const PixelBoxes boxes(globe);
   tbb::enumerable_thread_specific<ContentScratch> content_scratch;
-  // In the background: the next coarser zoom's vertices while a zoom's tiles are made, and a
-  // zoom's files written (one zoom after the other, in tile order) while the next is made.
-  // Declared after everything their tasks use: their destructors wait.
-  tbb::task_group preparing, writing;
+  // In the background: the next coarser zoom's vertices while a zoom's tiles are made; a
+  // zoom's files (one zoom after the other, in tile order) and its RMS error and maps while
+  // the next is made. Declared after everything their tasks use: their destructors wait.
+  tbb::task_group preparing, writing, finishing;
   try {
     // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
-    // drawn surface (where a viewer draws both), measured on that zoom's surface.
-    ZoomSurface finer_surface;
+    // drawn surface (where a viewer draws both), measured on that zoom's surface. Two
+    // surfaces' memory, taken in turn.
+    std::array<ZoomSurface, 2> surfaces{ZoomSurface(dem.pixelCount()), ZoomSurface(dem.pixelCount())};
     ZoomVertices vertices = zoomVertices(zoom_count - 1), coarser_vertices;
     for (std::size_t k = zoom_count; k-- > 0;) {
       if (k > 0) preparing.run([&, k] { coarser_vertices = zoomVertices(k - 1); });
@@ -644,7 +648,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       // The grid positions measured from are those before the snap: a vertex moves by up to
       // sqrt(3)/2 of its step.
       const double shift_m = 0.87 * vertices.largest_step_m;
-      ZoomSurface surface(dem.pixelCount());
+      // The zoom two finer was the last to use this memory (its maps are drawn by now).
+      ZoomSurface& surface = surfaces[k % 2];
+      surface.clear();
+      const ZoomSurface* finer = k + 1 < zoom_count ? &surfaces[(k + 1) % 2] : nullptr;
       ZoomSummary& zoom_summary = zoom_summaries[k];
       zoom_summary.position_step_m = zoom_step_m[k];
       zoom_summary.zoom = level.zoom;
@@ -655,25 +662,25 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       zoom_summary.triangles = level.mesh->triangleCount();
       for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
 
-      // Every tile on its own: its drawn content, measured, bounded and encoded.
+      // Every tile on its own: its drawn content, measured, bounded and encoded; the largest
+      // first.
       std::vector<EncodedTile>& tiles = written[k];
       tiles.resize(level.tiles.size());
-      const ZoomSurface* finer = finer_surface.empty() ? nullptr : &finer_surface;
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, tiles.size(), 1),
-          [&](const tbb::blocked_range<std::size_t>& range) {
-            for (std::size_t i = range.begin(); i < range.end(); ++i) {
-              const DrawnContent content = drawnContent(level.tiles[i], *level.mesh, vertices.snapped,
-                                                        vertices.normals, globe, content_scratch.local());
-              EncodedTile& out = tiles[i];
-              out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m,
-                                             finer, &surface);
-              out.region = drawnRegion(content.positions, content.triangle_indices);
-              out.vertices = content.positions.size();
-              out.glb = encodeContent(content, zoom_glb[k], &out.position_bits);
-            }
-          },
-          tbb::simple_partitioner());
+      std::vector<std::size_t> order(tiles.size());
+      for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+        return level.tiles[i].triangle_indices.size() > level.tiles[j].triangle_indices.size();
+      });
+      forEachLargestFirst(order, [&](std::size_t i) {
+        const DrawnContent content =
+            drawnContent(level.tiles[i], *level.mesh, vertices.snapped, vertices.normals, globe, content_scratch.local());
+        EncodedTile& out = tiles[i];
+        out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
+                                       &surface, nullptr, &boxes);
+        out.region = drawnRegion(content.positions, content.triangle_indices);
+        out.vertices = content.positions.size();
+        out.glb = encodeContent(content, zoom_glb[k], &out.position_bits);
+      });
       for (const EncodedTile& tile : tiles) {
         zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile.measure.max_error_m);
         zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile.position_bits);
@@ -687,31 +694,39 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
           tile.glb = std::vector<std::uint8_t>();  // (= {} would keep its memory)
         }
       });
-      // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
-      double sum_squares = 0;
-      std::size_t drawn_pixels = 0;
-      for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
-        if (!surface.drawn(p)) continue;
-        sum_squares += surface.error(p) * surface.error(p);
-        ++drawn_pixels;
-      }
-      zoom_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
-      if (options.report) {
-        maps[k] = drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, zoom_summary.max_error_m,
-                               surface);
-      }
-      finer_surface = std::move(surface);
+      finishing.wait();  // the finer zoom's: done with its surface, which the next zoom takes
+      finishing.run([&, k] {
+        const ZoomSurface& drawn = surfaces[k % 2];
+        ZoomSummary& finished_summary = zoom_summaries[k];
+        // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
+        double sum_squares = 0;
+        std::size_t drawn_pixels = 0;
+        for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
+          if (!drawn.drawn(p)) continue;
+          sum_squares += drawn.error(p) * drawn.error(p);
+          ++drawn_pixels;
+        }
+        finished_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
+        if (options.report) {
+          const ZoomContent& finished = zooms[k];
+          maps[k] = drawZoomMaps(dem, *finished.mesh, finished.map_clusters, frame.get(), finished.zoom,
+                                 finished_summary.max_error_m, drawn);
+        }
+      });
       preparing.wait();
       vertices = std::move(coarser_vertices);
       coarser_vertices = {};
       progress.advance(level.tiles.size());
     }
     writing.wait();
+    finishing.wait();
   } catch (...) {
     preparing.cancel();
     writing.cancel();
+    finishing.cancel();
     preparing.wait();
     writing.wait();
+    finishing.wait();
     throw;
   }
   std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
@@ -743,6 +758,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     summary.zooms.push_back(zoom_summary);
   }
 
+  progress.beginStage("writing the tileset", 0);
   Tileset tileset;
   tileset.generator = glb.generator;
   tileset.root = buildTree(nodes);
@@ -820,14 +836,20 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   } else {
     summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
   }
+  progress.endStage();
   progress.throwIfCancelled();
 
   // The report: maps per zoom, the check of what was written, then report.json and .html.
   if (options.report) {
-    // The levels are written and drawn: free them before the check decodes every tile.
+    // The levels are written and drawn: free them (and the pixels on the globe) before the
+    // check decodes every tile.
+    progress.beginStage("letting the levels go", 0);
     zooms = {};
     levels = {};
     pyramid = {};
+    frame.reset();
+    globe_storage.reset();
+    progress.endStage();
     std::optional<CheckReport> check;
     if (options.report_check_cuts > 0) {
       CheckOptions check_options;
@@ -836,14 +858,18 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       summary.check_ran = true;
       summary.check_ok = check->ok();
     }
+    progress.beginStage("writing the report", 0);
     summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const nlohmann::json report = buildReportJson(options, summary, progress.stages(), check, maps);
     summary.bytes += output.writeFile("report.json", report.dump(1) + "\n");
     summary.bytes += output.writeFile("report.html", renderReportHtml(report));
     summary.report_path = (std::filesystem::path(options.output_dir) / "report.html").string();
+    progress.endStage();
   }
   progress.throwIfCancelled();
+  progress.beginStage("moving the output into place", 0);
   output.commit();
+  progress.endStage();
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }
