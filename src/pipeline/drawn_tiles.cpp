@@ -236,12 +236,19 @@ PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longes
   if (!(least_rows >= 0 && least_columns >= 0 && most_rows < 1e9 && most_columns < 1e9)) {
     return candidatePixels(globe_, corners, longest_edge_m, shift_m);
   }
-  // candidatePixels's box (no corner at a pole) for given margins.
-  const auto boxWith = [&](double margin_rows, double margin_cols) {
+  // candidatePixels's box (no corner at a pole) for both margins: an edge is the same for
+  // both when the value rounded for the smaller margin rounds (up or down) to the value
+  // rounded for the larger one (every value between then rounds there too).
+  const double row_first_most = std::ceil(row_min - most_rows - 1e-9);
+  const double row_last_most = std::floor(row_max + most_rows + 1e-9);
+  const double col_first_most = std::ceil(col_min - most_columns - 1e-9);
+  const double col_last_most = std::floor(col_max + most_columns + 1e-9);
+  if (row_min - least_rows - 1e-9 <= row_first_most && row_max + least_rows + 1e-9 >= row_last_most &&
+      col_min - least_columns - 1e-9 <= col_first_most && col_max + least_columns + 1e-9 >= col_last_most) {
     PixelBox out;
-    out.row0 = static_cast<std::int32_t>(std::max(0.0, std::ceil(row_min - margin_rows - 1e-9)));
-    out.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, std::floor(row_max + margin_rows + 1e-9)));
-    double first = std::ceil(col_min - margin_cols - 1e-9), last = std::floor(col_max + margin_cols + 1e-9);
+    out.row0 = static_cast<std::int32_t>(std::max(0.0, row_first_most));
+    out.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, row_last_most));
+    double first = col_first_most, last = col_last_most;
     if (last - first + 1 >= dem.width) {
       first = 0;
       last = dem.width - 1;
@@ -253,10 +260,6 @@ PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longes
     out.col0 = static_cast<std::int64_t>(first);
     out.col1 = static_cast<std::int64_t>(last);
     return out;
-  };
-  const PixelBox least = boxWith(least_rows, least_columns), most = boxWith(most_rows, most_columns);
-  if (least.row0 == most.row0 && least.row1 == most.row1 && least.col0 == most.col0 && least.col1 == most.col1) {
-    return least;
   }
   return candidatePixels(globe_, corners, longest_edge_m, shift_m);
 }

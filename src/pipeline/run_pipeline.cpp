@@ -21,6 +21,10 @@
 
 #include <nlohmann/json.hpp>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
 #include "formats/gltf/write_glb.h"
@@ -849,6 +853,11 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     pyramid = {};
     frame.reset();
     globe_storage.reset();
+#if defined(__GLIBC__)
+    // glibc keeps most of what was freed (the levels' many mid-sized arrays) for reuse; the
+    // check does not reuse it: give it back.
+    malloc_trim(0);
+#endif
     progress.endStage();
     std::optional<CheckReport> check;
     if (options.report_check_cuts > 0) {
