@@ -14,6 +14,8 @@
 #include <immintrin.h>
 #endif
 
+#include "src/tin/measure_tin.h"
+
 namespace terratiles {
 namespace {
 
@@ -91,6 +93,35 @@ __attribute__((target("avx2"))) unsigned meets4(const DemOnGlobe& globe, const D
 }
 #endif
 
+#if defined(__x86_64__)
+
+// (p.col - col) * (q.row - row) - (p.row - row) * (q.col - col), four columns at a time.
+__attribute__((target("avx2"))) inline __m256d weightTerm(const GridPoint& p, const GridPoint& q, __m256d cols,
+                                                          __m256d rows) {
+  return _mm256_sub_pd(
+      _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(p.col), cols), _mm256_sub_pd(_mm256_set1_pd(q.row), rows)),
+      _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(p.row), rows), _mm256_sub_pd(_mm256_set1_pd(q.col), cols)));
+}
+
+// forEachCoveredPixel's test of four pixels (columns col .. col + 3 of `row`) as its scalar
+// code computes it, operation for operation (AVX2 has no fused multiply-add): bit k set when
+// column col + k is covered.
+__attribute__((target("avx2"))) unsigned covered4(const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                                                  double area2, double eps, double col, double row) {
+  const __m256d cols = _mm256_add_pd(_mm256_set1_pd(col), _mm256_set_pd(3, 2, 1, 0));
+  const __m256d rows = _mm256_set1_pd(row);
+  const __m256d area = _mm256_set1_pd(area2), size = _mm256_set1_pd(std::fabs(area2));
+  const __m256d wa = _mm256_div_pd(weightTerm(b, c, cols, rows), area), wb = _mm256_div_pd(weightTerm(c, a, cols, rows), area);
+  const __m256d wc = _mm256_sub_pd(_mm256_sub_pd(_mm256_set1_pd(1.0), wa), wb);
+  const __m256d below = _mm256_set1_pd(-eps);
+  const __m256d outside =
+      _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(_mm256_mul_pd(wa, size), below, _CMP_LT_OQ),
+                                _mm256_cmp_pd(_mm256_mul_pd(wb, size), below, _CMP_LT_OQ)),
+                   _mm256_cmp_pd(_mm256_mul_pd(wc, size), below, _CMP_LT_OQ));
+  return static_cast<unsigned>(~_mm256_movemask_pd(outside)) & 15u;
+}
+#endif
+
 // Pixels [first, last] (indices, one row) meeting the triangle, appended in order.
 void rowMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, std::size_t first, std::size_t last,
                 std::vector<PixelOffset>& hits) {
@@ -123,6 +154,37 @@ void rowMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, std::siz
 }
 
 }  // namespace
+
+void coveredValidPixels(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                        std::vector<std::uint32_t>& out) {
+#if defined(__x86_64__)
+  if (kHasAvx2) {
+    // forEachCoveredPixel's box and tolerance.
+    const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+    if (area2 == 0) return;
+    const double eps = 1e-9 * std::fabs(area2);
+    const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
+    const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
+    const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
+    const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
+    for (int row = min_row; row <= max_row; ++row) {
+      for (int col = min_col; col <= max_col; col += 4) {
+        unsigned inside = covered4(a, b, c, area2, eps, col, row);
+        if (max_col - col < 3) inside &= (1u << (max_col - col + 1)) - 1;
+        for (; inside != 0; inside &= inside - 1) {
+          const std::size_t pixel = dem.index(col + std::countr_zero(inside), row);
+          if (!std::isnan(dem.heights_m[pixel])) out.push_back(static_cast<std::uint32_t>(pixel));
+        }
+      }
+    }
+    return;
+  }
+#endif
+  forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double) {
+    if (!std::isnan(dem.heights_m[pixel])) out.push_back(static_cast<std::uint32_t>(pixel));
+    return true;
+  });
+}
 
 void pixelsMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const PixelBox& box,
                    std::vector<PixelOffset>& hits) {

@@ -123,6 +123,12 @@ struct PixelOffset {
 void pixelsMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const PixelBox& box,
                    std::vector<PixelOffset>& hits);
 
+// The valid (not nodata) pixels forEachCoveredPixel(dem, a, b, c, ...) visits (inside the
+// triangle in the grid), appended to `out` in its order (its arithmetic, four pixels of a
+// row at a time where the CPU has AVX2).
+void coveredValidPixels(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                        std::vector<std::uint32_t>& out);
+
 struct DrawnTileMeasure {
   double max_error_m = 0;
   std::size_t hits = 0;    // pixel and triangle pairs (a pixel on a shared edge counts twice)
