@@ -158,6 +158,7 @@ struct DecodeScratch {
   std::vector<double> xs, ys, zs;
   std::vector<int> transformed;
   std::vector<std::uint8_t> at_pole;
+  std::vector<GeodeticOfVertex> geodetic;
   std::vector<GridCorner> grid;
   std::vector<GridPoint> lattice;
   std::vector<std::uint32_t> outline_index;
@@ -185,6 +186,8 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
   zs.resize(n);
   std::vector<std::uint8_t>& at_pole = scratch.at_pole;
   at_pole.assign(n, 0);
+  std::vector<GeodeticOfVertex>& geodetic = scratch.geodetic;  // as decoded (before the geoid)
+  geodetic.resize(n);
   for (std::size_t v = 0; v < n; ++v) {
     // glTF y-up back to ECEF z-up: what a renderer draws, in double.
     const double gx = mesh.translation[0] + mesh.positions[3 * v];
@@ -193,6 +196,7 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
     ecef[v] = {gx, -gz, gy};
     double lat = 0, lon = 0, h = 0;
     earth.Reverse(ecef[v].x, ecef[v].y, ecef[v].z, lat, lon, h);
+    geodetic[v] = {lat, lon, h};
     at_pole[v] = std::fabs(lat) >= kPoleDeg;
     if (geoid) {
       const std::optional<double> undulation = geoid->undulationAt(lon, lat);
@@ -285,7 +289,7 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
     rasterise({v1.col, pole_row, 0}, {v2.col, pole_row, 0}, v2);
     rasterise({v1.col, pole_row, 0}, v2, v1);
   }
-  const Region content = drawnRegion(ecef, idx);
+  const Region content = drawnRegion(ecef, idx, geodetic);
   const auto& r = tile.region;
   tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&
                                                 content.east_rad <= r[2] && content.north_rad <= r[3] &&

@@ -407,7 +407,8 @@ void outlineEdges(std::span<const std::uint32_t> indices, std::size_t vertex_cou
   }
 }
 
-Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices) {
+Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices,
+                   std::span<const GeodeticOfVertex> known) {
   Region region;
   std::vector<Geodetic> geodetic(vertices.size());
   std::vector<std::uint8_t> used(vertices.size(), 0);
@@ -420,7 +421,8 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   std::vector<std::size_t> poles;
   for (std::size_t v = 0; v < vertices.size(); ++v) {
     if (!used[v]) continue;
-    geodetic[v] = geodeticOf(vertices[v].x, vertices[v].y, vertices[v].z);
+    geodetic[v] = known.empty() ? geodeticOf(vertices[v].x, vertices[v].y, vertices[v].z)
+                                : Geodetic{known[v].lat_deg, known[v].lon_deg, known[v].h_m};
     geocentric_lat[v] = geocentric(vertices[v].x, vertices[v].y, vertices[v].z);
     if (std::fabs(geodetic[v].lat_deg) >= kPoleDeg) {
       poles.push_back(v);

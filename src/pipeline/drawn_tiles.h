@@ -159,7 +159,13 @@ void outlineEdges(std::span<const std::uint32_t> indices, std::size_t vertex_cou
 
 // The region holding every drawn point of the triangles (see the header comment), grown by a
 // millimetre and 1e-10 rad against rounding. A vertex at a pole (|lat| within 1e-9 deg of 90)
-// adds no longitude.
-Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices);
+// adds no longitude. `geodetic` (when not empty): every vertex's WGS84 latitude, longitude
+// (degrees) and height as GeographicLib::Geocentric::WGS84().Reverse gives them, which the
+// region would otherwise compute.
+struct GeodeticOfVertex {
+  double lat_deg = 0, lon_deg = 0, h_m = 0;
+};
+Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices,
+                   std::span<const GeodeticOfVertex> geodetic = {});
 
 }  // namespace terratiles

@@ -101,9 +101,11 @@ void checkScans(const DemGrid& dem, const GeoidGrid* geoid) {
     const DrawnTriangle triangle(ecef[0], ecef[1], ecef[2]);
     if (triangle.degenerate()) continue;
     ++triangles;
-    const std::array<GridCorner, 3> grid{GridCorner{corners[0].col, corners[0].row, false},
-                                         GridCorner{corners[1].col, corners[1].row, false},
-                                         GridCorner{corners[2].col, corners[2].row, false}};
+    const auto gridCorner = [&](const GridPoint& p) {
+      const bool at_pole = p.row == std::round(p.row) && globe.poleRow(static_cast<std::int32_t>(p.row));
+      return GridCorner{p.col, p.row, at_pole};
+    };
+    const std::array<GridCorner, 3> grid{gridCorner(corners[0]), gridCorner(corners[1]), gridCorner(corners[2])};
     for (const double shift_m : {0.0, 1e-3, 0.0068}) {
       const PixelBox expected = candidatePixels(globe, grid, triangle.longestEdge(), shift_m);
       const PixelBox box = boxes.box(grid, triangle.longestEdge(), shift_m);
@@ -145,6 +147,25 @@ TEST_SUITE("check") {
     checkScans(readDem({test::sharedData("ch_dhm25_interlaken_25m_2056.tif")}), &swiss);
     checkScans(readDem({test::sharedData("srtm3_N57E011_4326.tif")}), nullptr);
     checkScans(readDem({test::sharedData("ca_on_lidar_dtm_1m_26917.tif")}), nullptr);
+    // The whole globe (ETOPO5 at every sixth pixel: half a degree; columns wrap, pole rows,
+    // long chords) with a patch of nodata.
+    const DemGrid etopo = readDem({test::sharedData("etopo5_global_4326.tif")});
+    constexpr int kStep = 6;
+    DemGrid globe = etopo;
+    globe.width = (etopo.width + kStep - 1) / kStep;
+    globe.height = (etopo.height + kStep - 1) / kStep;
+    globe.pixel_size_x = etopo.pixel_size_x * kStep;
+    globe.pixel_size_y = etopo.pixel_size_y * kStep;
+    globe.origin_x = etopo.pixelCentre(0, 0).x - globe.pixel_size_x / 2;
+    globe.origin_y = etopo.pixelCentre(0, 0).y + globe.pixel_size_y / 2;
+    globe.heights_m.assign(globe.pixelCount(), DemGrid::kNoData);
+    for (int row = 0; row < globe.height; ++row) {
+      for (int col = 0; col < globe.width; ++col) {
+        const bool patch = col > 100 && col < 140 && row > 50 && row < 90;
+        if (!patch) globe.heights_m[globe.index(col, row)] = etopo.heightAt(col * kStep, row * kStep);
+      }
+    }
+    checkScans(globe, nullptr);
   }
 
   TEST_CASE("outline edges are the edges exactly one triangle has in ascending order") {
