@@ -15,6 +15,7 @@
 #include <fstream>
 #include <iomanip>
 #include <memory>
+#include <mutex>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -27,6 +28,7 @@
 #include "src/geo/dem_on_globe.h"
 #include "src/geo/geoid.h"
 #include "src/pipeline/drawn_tiles.h"
+#include "src/pipeline/largest_first.h"
 #include "src/tiling/tile_key.h"
 #include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"
@@ -48,6 +50,7 @@ constexpr std::size_t kMaxProblems = 12;
 constexpr double kLatticeTolerance_px = 0.1;
 constexpr double kRoundTripTolerance_m = 0.01;
 constexpr double kPoleDeg = 90 - 1e-9;
+constexpr std::uint32_t kNotOnOutline = std::numeric_limits<std::uint32_t>::max();
 
 struct CheckTile {
   TileKey key;
@@ -56,17 +59,32 @@ struct CheckTile {
   std::array<double, 6> region{};  // west, south, east, north (rad), min, max height (m)
   int parent = -1;
   std::vector<int> children;
-  std::vector<std::uint32_t> pixels;  // valid DEM pixels the content covers, sorted
+  // Valid DEM pixels the content covers (with repeats), from its decoding until the coverage
+  // classes take them in.
+  std::vector<std::uint32_t> pixels;
   DrawnTileMeasure measure;           // the decoded content against the DEM and the finer zoom
   bool region_holds_content = true;
-  // The content's outline: its vertices on boundary edges (an edge of one triangle), in the
-  // grid frame (outline vertices back on their pixel centres) and as decoded (ECEF), and
-  // those edges.
+  // The content's outline: its vertices on boundary edges (an edge of one triangle), numbered
+  // 0, 1, ... in the order of their index in the decoded mesh, in the grid frame (outline
+  // vertices back on their pixel centres) and as decoded (ECEF), and those edges (into the
+  // outline vertices, ascending). Only these are kept of a decoded tile.
   std::vector<std::array<double, 2>> vertex_grid;
   std::vector<std::uint8_t> vertex_at_pole;
   std::vector<std::array<double, 3>> vertex_ecef;
   std::vector<std::array<std::uint32_t, 2>> boundary_edges;
-  std::vector<std::uint32_t> boundary_vertices;
+  // Lookups over the outline (outlineLookups): its vertices off the pole by grid position
+  // (the first of equal positions), and its edges off the pole by the 8-pixel cells they
+  // cross (cells by row then column; a cell's edges ascending).
+  struct OutlinePoint {
+    std::array<double, 2> grid;
+    std::uint32_t vertex;
+  };
+  std::vector<OutlinePoint> outline_by_position;
+  struct CellEdge {
+    std::array<std::int64_t, 2> cell;
+    std::uint32_t edge;
+  };
+  std::vector<CellEdge> edges_by_cell;
   std::size_t off_lattice = 0;  // outline vertices off their pixel centre by more than quantisation explains
   std::size_t pole_vertices = 0;
 };
@@ -135,46 +153,41 @@ class ToDemCrs {
   tbb::enumerable_thread_specific<std::unique_ptr<OGRCoordinateTransformation>> per_thread_;
 };
 
-// The distinct values of `pixels`, ascending (a bitmap over their range: a tile's pixels
-// span a block of rows, and sorting millions of repeats costs more).
-std::vector<std::uint32_t> sortedUnique(const std::vector<std::uint32_t>& pixels) {
-  std::vector<std::uint32_t> out;
-  if (pixels.empty()) return out;
-  const auto [lo, hi] = std::minmax_element(pixels.begin(), pixels.end());
-  const std::uint32_t first = *lo;
-  std::vector<std::uint64_t> bits((static_cast<std::size_t>(*hi - first) >> 6) + 1, 0);
-  for (const std::uint32_t p : pixels) bits[(p - first) >> 6] |= std::uint64_t{1} << ((p - first) & 63);
-  std::size_t count = 0;
-  for (const std::uint64_t word : bits) count += static_cast<std::size_t>(std::popcount(word));
-  out.reserve(count);
-  for (std::size_t w = 0; w < bits.size(); ++w) {
-    for (std::uint64_t word = bits[w]; word != 0; word &= word - 1) {
-      out.push_back(first + static_cast<std::uint32_t>((w << 6) + static_cast<std::size_t>(std::countr_zero(word))));
-    }
-  }
-  return out;
-}
-
-// A decoded tile between decodeTile and measureTile.
-struct DecodedTile {
-  std::vector<EcefPoint> ecef;  // as decoded
+// Per thread scratch for decodeAndMeasure, reused from tile to tile.
+struct DecodeScratch {
+  std::vector<double> xs, ys, zs;
+  std::vector<int> transformed;
+  std::vector<std::uint8_t> at_pole;
+  std::vector<GeodeticOfVertex> geodetic;
   std::vector<GridCorner> grid;
-  std::vector<std::uint32_t> indices;
-  std::vector<std::uint32_t> covered;  // valid pixels inside its triangles in the grid (repeats)
+  std::vector<GridPoint> lattice;
+  std::vector<std::uint32_t> outline_index;
+  OutlineScratch outline;
+  std::vector<std::array<std::uint32_t, 2>> edges;
 };
 
-// Decodes a tile (see the header): its outline, its coverage in the grid, its region. Needs no
-// other tile, so it runs ahead of the measures, which go zoom by zoom.
-void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* geoid, ToDemCrs& to_dem,
-                double widest_step_m, CheckTile& tile, DecodedTile& out) {
+// Decodes a tile (see the header) and measures it: its outline, its coverage in the grid and
+// as drawn, its region, its drawn error against the DEM and against the finer zoom's surface
+// (adding its own to `surface`). Needs the finer zoom's surface complete, no other tile.
+void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelBoxes& boxes, const GeoidGrid* geoid,
+                      ToDemCrs& to_dem, double widest_step_m, const ZoomSurface* finer, ZoomSurface& surface,
+                      CheckTile& tile, DecodeScratch& scratch) {
   const DemGrid& dem = globe.dem();
   DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
   GlbMesh& mesh = decoded.mesh;
   const auto& earth = GeographicLib::Geocentric::WGS84();
   const std::size_t n = mesh.vertexCount();
   std::vector<EcefPoint> ecef(n);
-  std::vector<double> xs(n), ys(n), zs(n);
-  std::vector<std::uint8_t> at_pole(n, 0);
+  std::vector<double>& xs = scratch.xs;
+  std::vector<double>& ys = scratch.ys;
+  std::vector<double>& zs = scratch.zs;
+  xs.resize(n);
+  ys.resize(n);
+  zs.resize(n);
+  std::vector<std::uint8_t>& at_pole = scratch.at_pole;
+  at_pole.assign(n, 0);
+  std::vector<GeodeticOfVertex>& geodetic = scratch.geodetic;  // as decoded (before the geoid)
+  geodetic.resize(n);
   for (std::size_t v = 0; v < n; ++v) {
     // glTF y-up back to ECEF z-up: what a renderer draws, in double.
     const double gx = mesh.translation[0] + mesh.positions[3 * v];
@@ -183,6 +196,7 @@ void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* g
     ecef[v] = {gx, -gz, gy};
     double lat = 0, lon = 0, h = 0;
     earth.Reverse(ecef[v].x, ecef[v].y, ecef[v].z, lat, lon, h);
+    geodetic[v] = {lat, lon, h};
     at_pole[v] = std::fabs(lat) >= kPoleDeg;
     if (geoid) {
       const std::optional<double> undulation = geoid->undulationAt(lon, lat);
@@ -193,13 +207,15 @@ void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* g
     ys[v] = lat;
     zs[v] = h;
   }
-  std::vector<int> transformed(n, 1);
+  std::vector<int>& transformed = scratch.transformed;
+  transformed.assign(n, 1);
   if (n > 0 && !to_dem.local().Transform(n, xs.data(), ys.data(), zs.data(), transformed.data())) {
     throw Error(ErrorCode::Input, tile.uri + ": vertices cannot be transformed back to " + dem.crs_name);
   }
   // A geographic DEM: longitudes back into the DEM's 360 degrees (lon 180 and -180 are one
   // meridian).
-  std::vector<GridCorner> grid(n);
+  std::vector<GridCorner>& grid = scratch.grid;
+  grid.resize(n);
   for (std::size_t v = 0; v < n; ++v) {
     if (to_dem.geographic()) {
       while (xs[v] < dem.origin_x) xs[v] += 360;
@@ -215,32 +231,24 @@ void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* g
   const auto& idx = mesh.triangle_indices;
 
   // The outline, and its vertices back on their pixel centres.
-  std::vector<std::uint64_t> edges;
-  edges.reserve(idx.size());
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    for (std::size_t k = 0; k < 3; ++k) {
-      const std::uint32_t a = idx[t + k], b = idx[t + (k + 1) % 3];
-      edges.push_back((static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b));
-    }
+  outlineEdges(idx, n, scratch.outline, scratch.edges);
+  // Outline vertices numbered in the order of their mesh index.
+  std::vector<std::uint32_t>& outline_index = scratch.outline_index;
+  outline_index.assign(n, kNotOnOutline);
+  for (const auto& edge : scratch.edges) outline_index[edge[0]] = outline_index[edge[1]] = 0;
+  std::vector<std::uint32_t> outline_vertices;  // mesh index of each outline vertex
+  for (std::uint32_t v = 0; v < n; ++v) {
+    if (outline_index[v] == kNotOnOutline) continue;
+    outline_index[v] = static_cast<std::uint32_t>(outline_vertices.size());
+    outline_vertices.push_back(v);
   }
-  std::sort(edges.begin(), edges.end());
-  for (std::size_t i = 0; i < edges.size();) {
-    std::size_t j = i;
-    while (j < edges.size() && edges[j] == edges[i]) ++j;
-    if (j - i == 1) {
-      const auto a = static_cast<std::uint32_t>(edges[i] >> 32), b = static_cast<std::uint32_t>(edges[i] & 0xffffffffu);
-      tile.boundary_edges.push_back({a, b});
-      tile.boundary_vertices.insert(tile.boundary_vertices.end(), {a, b});
-    }
-    i = j;
-  }
-  std::sort(tile.boundary_vertices.begin(), tile.boundary_vertices.end());
-  tile.boundary_vertices.erase(std::unique(tile.boundary_vertices.begin(), tile.boundary_vertices.end()),
-                               tile.boundary_vertices.end());
-  std::vector<GridPoint> lattice(n);
+  tile.boundary_edges.reserve(scratch.edges.size());
+  for (const auto& edge : scratch.edges) tile.boundary_edges.push_back({outline_index[edge[0]], outline_index[edge[1]]});
+  std::vector<GridPoint>& lattice = scratch.lattice;
+  lattice.resize(n);
   for (std::size_t v = 0; v < n; ++v) lattice[v] = {grid[v].col, grid[v].row, 0};
   const double tolerance_m = 0.5 * std::sqrt(3.0) * widest_step_m + kRoundTripTolerance_m;
-  for (const std::uint32_t v : tile.boundary_vertices) {
+  for (const std::uint32_t v : outline_vertices) {
     if (at_pole[v]) continue;
     const double col = std::round(grid[v].col), row = std::round(grid[v].row);
     const auto spacing_row = static_cast<std::int32_t>(std::clamp(row, 0.0, dem.height - 1.0));
@@ -257,12 +265,9 @@ void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* g
   // Coverage: the pixels inside its triangles in the grid and the pixels whose verticals
   // meet its triangles as drawn (a triangle with a pole vertex has no place in the grid; a
   // long chord strays from its grid triangle by its bulge, far from a pole too).
-  std::vector<std::uint32_t> covered;
+  std::vector<std::uint32_t>& covered = tile.pixels;
   const auto rasterise = [&](const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-    forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double) {
-      if (!std::isnan(dem.heights_m[pixel])) covered.push_back(static_cast<std::uint32_t>(pixel));
-      return true;
-    });
+    coveredValidPixels(dem, a, b, c, covered);
   };
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
     const std::uint32_t corner[3] = {idx[t], idx[t + 1], idx[t + 2]};
@@ -284,34 +289,26 @@ void decodeTile(const fs::path& dir, const DemOnGlobe& globe, const GeoidGrid* g
     rasterise({v1.col, pole_row, 0}, {v2.col, pole_row, 0}, v2);
     rasterise({v1.col, pole_row, 0}, v2, v1);
   }
-  const Region content = drawnRegion(ecef, idx);
+  const Region content = drawnRegion(ecef, idx, geodetic);
   const auto& r = tile.region;
   tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&
                                                 content.east_rad <= r[2] && content.north_rad <= r[3] &&
                                                 content.min_height_m >= r[4] && content.max_height_m <= r[5]);
 
-  tile.vertex_grid.resize(n);
-  tile.vertex_ecef.resize(n);
-  tile.vertex_at_pole = at_pole;
-  for (std::size_t v = 0; v < n; ++v) {
-    tile.vertex_grid[v] = {lattice[v].col, lattice[v].row};
-    tile.vertex_ecef[v] = {ecef[v].x, ecef[v].y, ecef[v].z};
+  const std::size_t m = outline_vertices.size();
+  tile.vertex_grid.resize(m);
+  tile.vertex_ecef.resize(m);
+  tile.vertex_at_pole.resize(m);
+  for (std::size_t k = 0; k < m; ++k) {
+    const std::uint32_t v = outline_vertices[k];
+    tile.vertex_grid[k] = {lattice[v].col, lattice[v].row};
+    tile.vertex_ecef[k] = {ecef[v].x, ecef[v].y, ecef[v].z};
+    tile.vertex_at_pole[k] = at_pole[v];
   }
-  out.ecef = std::move(ecef);
-  out.grid = std::move(grid);
-  out.indices = std::move(mesh.triangle_indices);
-  out.covered = std::move(covered);
-}
 
-// Measures a decoded tile: its drawn error against the DEM and against the finer zoom's
-// surface (adding its own to `surface`) and the pixels its verticals meet; frees `decoded`.
-void measureTile(const DemOnGlobe& globe, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile,
-                 DecodedTile& decoded) {
-  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them).
-  tile.measure = measureDrawnTile(globe, decoded.ecef, decoded.grid, decoded.indices, 1e-3, finer, &surface,
-                                  &decoded.covered);
-  tile.pixels = sortedUnique(decoded.covered);
-  decoded = DecodedTile{};
+  // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them); the pixels
+  // met join its coverage.
+  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface, &covered, &boxes);
 }
 
 // Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that
@@ -319,34 +316,49 @@ void measureTile(const DemOnGlobe& globe, const ZoomSurface* finer, ZoomSurface&
 // the other (in the grid, back on their pixel centres) must be a vertex of it. Returns the
 // outline vertices that are not; vertices at a pole are left out (they have no column, and
 // every pole triangle shares the one pole vertex).
-std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, std::array<double, 2>* first_missing = nullptr) {
-  constexpr double kOnEdge_px = 1e-6;
-  // The other tile's outline edges by 8-pixel cell.
-  constexpr double kCell = 8;
-  std::map<std::pair<std::int64_t, std::int64_t>, std::vector<std::size_t>> cells;
-  for (std::size_t e = 0; e < to.boundary_edges.size(); ++e) {
-    if (to.vertex_at_pole[to.boundary_edges[e][0]] || to.vertex_at_pole[to.boundary_edges[e][1]]) continue;
-    const auto& a = to.vertex_grid[to.boundary_edges[e][0]];
-    const auto& b = to.vertex_grid[to.boundary_edges[e][1]];
+constexpr double kOnEdge_px = 1e-6;
+constexpr double kCell = 8;
+
+// The lookups missingBorderVertices and sharedVertexGaps use (CheckTile::outline_by_position,
+// edges_by_cell), built once per tile.
+void outlineLookups(CheckTile& tile) {
+  tile.outline_by_position.clear();
+  for (std::uint32_t v = 0; v < tile.vertex_grid.size(); ++v) {
+    if (!tile.vertex_at_pole[v]) tile.outline_by_position.push_back({tile.vertex_grid[v], v});
+  }
+  std::stable_sort(tile.outline_by_position.begin(), tile.outline_by_position.end(),
+                   [](const CheckTile::OutlinePoint& p, const CheckTile::OutlinePoint& q) { return p.grid < q.grid; });
+  tile.edges_by_cell.clear();
+  for (std::size_t e = 0; e < tile.boundary_edges.size(); ++e) {
+    if (tile.vertex_at_pole[tile.boundary_edges[e][0]] || tile.vertex_at_pole[tile.boundary_edges[e][1]]) continue;
+    const auto& a = tile.vertex_grid[tile.boundary_edges[e][0]];
+    const auto& b = tile.vertex_grid[tile.boundary_edges[e][1]];
     const auto c0 = static_cast<std::int64_t>(std::floor((std::min(a[0], b[0]) - kOnEdge_px) / kCell));
     const auto c1 = static_cast<std::int64_t>(std::floor((std::max(a[0], b[0]) + kOnEdge_px) / kCell));
     const auto r0 = static_cast<std::int64_t>(std::floor((std::min(a[1], b[1]) - kOnEdge_px) / kCell));
     const auto r1 = static_cast<std::int64_t>(std::floor((std::max(a[1], b[1]) + kOnEdge_px) / kCell));
     if ((c1 - c0 + 1) * (r1 - r0 + 1) > 4096) continue;  // a degenerate outline edge spanning the world
     for (std::int64_t r = r0; r <= r1; ++r) {
-      for (std::int64_t c = c0; c <= c1; ++c) cells[{c, r}].push_back(e);
+      for (std::int64_t c = c0; c <= c1; ++c) tile.edges_by_cell.push_back({{c, r}, static_cast<std::uint32_t>(e)});
     }
   }
+  std::stable_sort(tile.edges_by_cell.begin(), tile.edges_by_cell.end(),
+                   [](const CheckTile::CellEdge& p, const CheckTile::CellEdge& q) { return p.cell < q.cell; });
+}
+
+std::size_t missingBorderVertices(const CheckTile& from, const CheckTile& to, std::array<double, 2>* first_missing = nullptr) {
+  // The other tile's outline edges by 8-pixel cell.
+  const auto byCell = [](const CheckTile::CellEdge& p, const std::array<std::int64_t, 2>& cell) { return p.cell < cell; };
   std::size_t missing = 0;
-  for (const std::uint32_t v : from.boundary_vertices) {
+  for (std::uint32_t v = 0; v < from.vertex_grid.size(); ++v) {
     if (from.vertex_at_pole[v]) continue;
     const auto& p = from.vertex_grid[v];
-    const auto found = cells.find({static_cast<std::int64_t>(std::floor(p[0] / kCell)),
-                                   static_cast<std::int64_t>(std::floor(p[1] / kCell))});
-    if (found == cells.end()) continue;
+    const std::array<std::int64_t, 2> cell{static_cast<std::int64_t>(std::floor(p[0] / kCell)),
+                                           static_cast<std::int64_t>(std::floor(p[1] / kCell))};
     bool on_edge = false, matched = false;
-    for (const std::size_t e : found->second) {
-      const std::uint32_t ia = to.boundary_edges[e][0], ib = to.boundary_edges[e][1];
+    for (auto it = std::lower_bound(to.edges_by_cell.begin(), to.edges_by_cell.end(), cell, byCell);
+         it != to.edges_by_cell.end() && it->cell == cell; ++it) {
+      const std::uint32_t ia = to.boundary_edges[it->edge][0], ib = to.boundary_edges[it->edge][1];
       const auto& a = to.vertex_grid[ia];
       const auto& b = to.vertex_grid[ib];
       const double ex = b[0] - a[0], ey = b[1] - a[1];
@@ -372,17 +384,15 @@ struct SharedVertexGaps {
 };
 
 SharedVertexGaps sharedVertexGaps(const CheckTile& a, const CheckTile& b) {
-  std::map<std::pair<double, double>, std::uint32_t> outline_of_b;
-  for (const std::uint32_t v : b.boundary_vertices) {
-    if (!b.vertex_at_pole[v]) outline_of_b.emplace(std::pair{b.vertex_grid[v][0], b.vertex_grid[v][1]}, v);
-  }
   SharedVertexGaps gaps;
-  for (const std::uint32_t v : a.boundary_vertices) {
+  const auto byPosition = [](const CheckTile::OutlinePoint& p, const std::array<double, 2>& grid) { return p.grid < grid; };
+  for (std::uint32_t v = 0; v < a.vertex_grid.size(); ++v) {
     if (a.vertex_at_pole[v]) continue;
-    const auto found = outline_of_b.find({a.vertex_grid[v][0], a.vertex_grid[v][1]});
-    if (found == outline_of_b.end()) continue;
+    const auto found = std::lower_bound(b.outline_by_position.begin(), b.outline_by_position.end(), a.vertex_grid[v],
+                                        byPosition);
+    if (found == b.outline_by_position.end() || a.vertex_grid[v] < found->grid) continue;
     const auto& p = a.vertex_ecef[v];
-    const auto& q = b.vertex_ecef[found->second];
+    const auto& q = b.vertex_ecef[found->vertex];
     ++gaps.shared;
     if (p != q) {
       ++gaps.apart;
@@ -415,41 +425,51 @@ std::array<int, 2> unbalancedPair(const std::vector<int>& cut, const std::vector
   return {-1, -1};
 }
 
-// The pixels by the set of tiles covering them. Class 0 is the empty set; class c > 0 is the
-// set of class parent[c] (created before it) with tile[c] added. footprint_pixels[c]: the
-// footprint pixels whose set is exactly class c's.
+// The pixels by the set of tiles covering them, refined one tile at a time (in any order).
+// Class 0 is the empty set; class c > 0 is the set of class parent[c] (created before it)
+// with tile[c] added. footprint_pixels[c]: the footprint pixels whose set is exactly class c's.
 struct PixelClasses {
-  std::vector<std::uint32_t> parent{0};
-  std::vector<std::uint32_t> tile{0};
-  std::vector<std::size_t> footprint_pixels;
-};
+  explicit PixelClasses(std::size_t pixels) : class_of(pixels, 0) {}
 
-PixelClasses coverageClasses(const std::vector<CheckTile>& tiles, const std::vector<std::uint8_t>& footprint) {
-  PixelClasses classes;
-  std::vector<std::uint32_t> class_of(footprint.size(), 0);
-  // Per class, the class it became in the current tile (valid where refined_in == tile + 1).
-  std::vector<std::uint32_t> refined{0}, refined_in{0};
-  for (std::size_t t = 0; t < tiles.size(); ++t) {
-    const auto stamp = static_cast<std::uint32_t>(t + 1);
-    for (const std::uint32_t p : tiles[t].pixels) {
+  // Adds tile t, covering `pixels` (repeats allowed).
+  void add(std::size_t t, const std::vector<std::uint32_t>& pixels) {
+    const auto stamp = static_cast<std::uint32_t>(++tiles_added);
+    for (const std::uint32_t p : pixels) {
       const std::uint32_t old = class_of[p];
+      if (created_in[old] == stamp) continue;  // a repeat: moved by this tile already
       if (refined_in[old] != stamp) {
         refined_in[old] = stamp;
-        refined[old] = static_cast<std::uint32_t>(classes.parent.size());
-        classes.parent.push_back(old);
-        classes.tile.push_back(static_cast<std::uint32_t>(t));
+        refined[old] = static_cast<std::uint32_t>(parent.size());
+        parent.push_back(old);
+        tile.push_back(static_cast<std::uint32_t>(t));
         refined.push_back(0);
         refined_in.push_back(0);
+        created_in.push_back(stamp);
       }
       class_of[p] = refined[old];
     }
   }
-  classes.footprint_pixels.assign(classes.parent.size(), 0);
-  for (std::size_t p = 0; p < footprint.size(); ++p) {
-    if (footprint[p]) ++classes.footprint_pixels[class_of[p]];
+
+  // Counts the footprint's pixels per class and lets the per-pixel classes go.
+  void countFootprint(const std::vector<std::uint8_t>& footprint) {
+    footprint_pixels.assign(parent.size(), 0);
+    for (std::size_t p = 0; p < footprint.size(); ++p) {
+      if (footprint[p]) ++footprint_pixels[class_of[p]];
+    }
+    class_of = std::vector<std::uint32_t>();
   }
-  return classes;
-}
+
+  std::vector<std::uint32_t> parent{0};
+  std::vector<std::uint32_t> tile{0};
+  std::vector<std::size_t> footprint_pixels;
+
+ private:
+  std::vector<std::uint32_t> class_of;
+  // Per class: the class it became in the tile being added (valid where refined_in is its
+  // stamp), and the stamp of the tile that created it.
+  std::vector<std::uint32_t> refined{0}, refined_in{0}, created_in{0};
+  std::size_t tiles_added = 0;
+};
 
 bool isAncestor(int ancestor, int tile, const std::vector<CheckTile>& tiles) {
   for (int t = tile; t >= 0; t = tiles[static_cast<std::size_t>(t)].parent) {
@@ -479,8 +499,12 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     geoid = readGeoidGrid(build.at("geoid").get<std::string>());
   }
   progress.endStage();
-  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  // The stage holds the transformation's set-up too (a few tenths of a second in PROJ).
+  progress.beginStage("placing the DEM's pixels on the globe", 0);
+  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr);
+  const PixelBoxes boxes(globe);
   ToDemCrs to_dem(dem);
+  progress.endStage();
   // The widest quantisation step any zoom used (an output without one: the lattice tolerance
   // alone bounds where a vertex is put back on its pixel centre).
   const double widest_step_m = build.value("position_step_m", 1e9);
@@ -500,43 +524,48 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   if (report.tiles == 0) throw Error(ErrorCode::Input, output_dir + ": tileset.json has no content");
   report.zooms = static_cast<std::size_t>(max_zoom - min_zoom + 1);
   progress.beginStage("decoding and measuring tiles", report.tiles);
+  // The footprint: the valid pixels the finest zoom covers. The coverage classes take in each
+  // zoom's tiles as soon as they are measured.
+  std::vector<std::uint8_t> footprint(dem.pixelCount(), 0);
+  PixelClasses classes(dem.pixelCount());
+  std::mutex classes_mutex;
   {
     std::vector<std::vector<std::size_t>> at_zoom(static_cast<std::size_t>(max_zoom + 1));
     for (std::size_t i = 0; i < tiles.size(); ++i) {
       if (!tiles[i].uri.empty()) at_zoom[static_cast<std::size_t>(tiles[i].key.zoom)].push_back(i);
     }
-    std::vector<DecodedTile> decoded(tiles.size());
-    // The next coarser zoom is decoded in the background while a zoom is measured. Declared
-    // after what its tasks use: its destructor waits for them.
-    tbb::task_group decoding;
-    const auto decodeZoom = [&](std::int32_t zoom) {
-      for (const std::size_t i : at_zoom[static_cast<std::size_t>(zoom)]) {
-        decoding.run([&, i] {
-          decodeTile(dir, globe, geoid ? &*geoid : nullptr, to_dem, widest_step_m, tiles[i], decoded[i]);
-        });
+    tbb::enumerable_thread_specific<DecodeScratch> scratch;
+    // Two surfaces' memory, swapped from zoom to zoom.
+    ZoomSurface finer(dem.pixelCount()), surface(dem.pixelCount());
+    for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
+      const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
+      surface.clear();
+      // The largest files first (a tile's work grows with its size).
+      std::vector<std::size_t> order(here);
+      std::vector<std::uintmax_t> bytes(tiles.size(), 0);
+      for (const std::size_t i : here) {
+        std::error_code error;
+        bytes[i] = fs::file_size(dir / tiles[i].uri, error);
       }
-    };
-    try {
-      decodeZoom(max_zoom);
-      decoding.wait();
-      ZoomSurface finer;
-      for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
-        if (zoom > min_zoom) decodeZoom(zoom - 1);
-        const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
-        ZoomSurface surface(dem.pixelCount());
-        tbb::parallel_for(std::size_t{0}, here.size(), [&](std::size_t k) {
-          measureTile(globe, finer.empty() ? nullptr : &finer, surface, tiles[here[k]], decoded[here[k]]);
-        });
-        decoding.wait();
-        finer = std::move(surface);
-        progress.advance(here.size());
-      }
-    } catch (...) {
-      decoding.cancel();
-      decoding.wait();
-      throw;
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) { return bytes[i] > bytes[j]; });
+      forEachLargestFirst(order, [&](std::size_t i) {
+        CheckTile& tile = tiles[i];
+        decodeAndMeasure(dir, globe, boxes, geoid ? &*geoid : nullptr, to_dem, widest_step_m,
+                         zoom < max_zoom ? &finer : nullptr, surface, tile, scratch.local());
+        // Into the classes in the order tiles finish: the classes differ in their numbering
+        // only, every count made from them is the same.
+        const std::lock_guard<std::mutex> lock(classes_mutex);
+        if (zoom == max_zoom) {
+          for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
+        }
+        classes.add(i, tile.pixels);
+        tile.pixels = std::vector<std::uint32_t>();  // (= {} would keep its memory)
+      });
+      std::swap(finer, surface);
+      progress.advance(here.size());
     }
   }
+  classes.countFootprint(footprint);
   progress.endStage();
 
   for (const CheckTile& tile : tiles) {
@@ -582,11 +611,6 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   }
 
   // ---- 1. coverage ----
-  std::vector<std::uint8_t> footprint(dem.pixelCount(), 0);
-  for (const CheckTile& tile : tiles) {
-    if (tile.uri.empty() || tile.key.zoom != max_zoom) continue;
-    for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
-  }
   for (std::int32_t row = 0; row < dem.height; ++row) {
     for (std::int32_t col = 0; col < dem.width; ++col) {
       const std::size_t p = dem.index(col, row);
@@ -613,7 +637,6 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   // refinement: a class is a set of tiles, made from its parent class by one tile more), so a
   // cut is counted per class instead of per pixel: a pixel is a hole of a cut when no tile of
   // its class is in the cut.
-  const PixelClasses classes = coverageClasses(tiles, footprint);
   std::vector<std::uint8_t> in_cut(tiles.size(), 0), class_covered(classes.parent.size(), 0);
   const auto holesOf = [&](const std::vector<int>& cut) {
     for (const int t : cut) in_cut[static_cast<std::size_t>(t)] = 1;
@@ -691,6 +714,7 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   //      positions of the outline vertices touching tiles share ----
   {
     progress.beginStage("vertex correspondence", 0);
+    tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) { outlineLookups(tiles[i]); });
     std::vector<std::array<int, 2>> pairs;  // one zoom apart (not parent and child) or neighbours at one zoom
     for (std::size_t i = 0; i < tiles.size(); ++i) {
       for (std::size_t j = 0; j < tiles.size(); ++j) {

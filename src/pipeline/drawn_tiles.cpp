@@ -1,26 +1,26 @@
 #include "src/pipeline/drawn_tiles.h"
 
 #include <GeographicLib/Geocentric.hpp>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
+#include <cmath>
+#include <limits>
 #include <numbers>
+
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
+#include "src/tin/measure_tin.h"
 
 namespace terratiles {
 namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kPoleDeg = 90 - 1e-9;
-
-// Lowers (or raises) `slot` to `value` unless it already holds a lower (higher) one.
-template <typename Better>
-void atomicImprove(float& slot, float value, Better better) {
-  std::atomic_ref<float> ref(slot);
-  float current = ref.load(std::memory_order_relaxed);
-  while ((std::isnan(current) || better(value, current)) &&
-         !ref.compare_exchange_weak(current, value, std::memory_order_relaxed)) {
-  }
-}
 
 struct Geodetic {
   double lat_deg, lon_deg, h_m;
@@ -32,29 +32,317 @@ Geodetic geodeticOf(double x, double y, double z) {
   return g;
 }
 
+#if defined(__x86_64__)
+const bool kHasAvx2 = __builtin_cpu_supports("avx2");
+
+__attribute__((target("avx2"))) inline __m256d mul(__m256d p, __m256d q) { return _mm256_mul_pd(p, q); }
+__attribute__((target("avx2"))) inline __m256d add(__m256d p, __m256d q) { return _mm256_add_pd(p, q); }
+__attribute__((target("avx2"))) inline __m256d sub(__m256d p, __m256d q) { return _mm256_sub_pd(p, q); }
+
+// DrawnTriangle::meets for the four pixels from index i on (lane k: pixel i + k), as its
+// scalar code computes it operation for operation (no fused multiply-add: AVX2 alone has
+// none), so a lane's verdict and offset are the scalar ones bit for bit. Returns the lanes
+// that meet (bit k: lane k); offsets[k] is lane k's offset where it meets.
+__attribute__((target("avx2"))) unsigned meets4(const DemOnGlobe& globe, const DrawnTriangle& tri, std::size_t i,
+                                                double offsets[4]) {
+  constexpr double kTolerance = 1e-9;  // DrawnTriangle::meets's
+  const __m256d x = _mm256_loadu_pd(globe.pointX() + i), y = _mm256_loadu_pd(globe.pointY() + i),
+                z = _mm256_loadu_pd(globe.pointZ() + i);
+  const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
+                uz = _mm256_loadu_pd(globe.upZ() + i);
+  const __m256d ab0 = _mm256_set1_pd(tri.ab[0]), ab1 = _mm256_set1_pd(tri.ab[1]), ab2 = _mm256_set1_pd(tri.ab[2]);
+  const __m256d ac0 = _mm256_set1_pd(tri.ac[0]), ac1 = _mm256_set1_pd(tri.ac[1]), ac2 = _mm256_set1_pd(tri.ac[2]);
+  const __m256d ax = _mm256_set1_pd(tri.a.x), ay = _mm256_set1_pd(tri.a.y), az = _mm256_set1_pd(tri.a.z);
+  const __m256d px = sub(mul(uy, ac2), mul(uz, ac1)), py = sub(mul(uz, ac0), mul(ux, ac2)),
+                pz = sub(mul(ux, ac1), mul(uy, ac0));
+  const __m256d det = add(add(mul(ab0, px), mul(ab1, py)), mul(ab2, pz));
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  // det != 0 and finite (NaN fails both).
+  __m256d ok = _mm256_and_pd(_mm256_cmp_pd(det, _mm256_setzero_pd(), _CMP_NEQ_OQ),
+                             _mm256_cmp_pd(_mm256_andnot_pd(sign, det), _mm256_set1_pd(HUGE_VAL), _CMP_LT_OQ));
+  const __m256d inverse = _mm256_div_pd(_mm256_set1_pd(1.0), det);
+  const __m256d tx = sub(x, ax), ty = sub(y, ay), tz = sub(z, az);
+  const __m256d u = mul(add(add(mul(tx, px), mul(ty, py)), mul(tz, pz)), inverse);
+  const __m256d low = _mm256_set1_pd(-kTolerance), high = _mm256_set1_pd(1 + kTolerance);
+  // The scalar code refuses u < low or u > high: a NaN goes on, as there.
+  ok = _mm256_and_pd(ok, _mm256_and_pd(_mm256_cmp_pd(u, low, _CMP_NLT_UQ), _mm256_cmp_pd(u, high, _CMP_NGT_UQ)));
+  const __m256d qx = sub(mul(ty, ab2), mul(tz, ab1)), qy = sub(mul(tz, ab0), mul(tx, ab2)),
+                qz = sub(mul(tx, ab1), mul(ty, ab0));
+  const __m256d v = mul(add(add(mul(ux, qx), mul(uy, qy)), mul(uz, qz)), inverse);
+  ok = _mm256_and_pd(ok, _mm256_and_pd(_mm256_cmp_pd(v, low, _CMP_NLT_UQ), _mm256_cmp_pd(add(u, v), high, _CMP_NGT_UQ)));
+  if (_mm256_movemask_pd(ok) == 0) return 0;
+  // DrawnTriangle::offset: 0 at a corner's own point, else across / along (along = 0 gives an
+  // infinity or NaN that fails the reach, as the scalar NaN does).
+  const __m256d n0 = _mm256_set1_pd(tri.normal[0]), n1 = _mm256_set1_pd(tri.normal[1]),
+                n2 = _mm256_set1_pd(tri.normal[2]);
+  const __m256d along = add(add(mul(n0, ux), mul(n1, uy)), mul(n2, uz));
+  const __m256d across = add(add(mul(n0, sub(ax, x)), mul(n1, sub(ay, y))), mul(n2, sub(az, z)));
+  __m256d at_corner = _mm256_setzero_pd();
+  for (int k = 0; k < 3; ++k) {
+    const EcefPoint& c = tri.corner(k);
+    at_corner = _mm256_or_pd(
+        at_corner, _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(x, _mm256_set1_pd(c.x), _CMP_EQ_OQ),
+                                               _mm256_cmp_pd(y, _mm256_set1_pd(c.y), _CMP_EQ_OQ)),
+                                 _mm256_cmp_pd(z, _mm256_set1_pd(c.z), _CMP_EQ_OQ)));
+  }
+  const __m256d offset = _mm256_blendv_pd(_mm256_div_pd(across, along), _mm256_setzero_pd(), at_corner);
+  ok = _mm256_and_pd(ok, _mm256_cmp_pd(_mm256_andnot_pd(sign, offset), _mm256_set1_pd(DrawnTriangle::kReach_m),
+                                       _CMP_LE_OQ));
+  _mm256_storeu_pd(offsets, offset);
+  return static_cast<unsigned>(_mm256_movemask_pd(ok));
+}
+#endif
+
+#if defined(__x86_64__)
+
+// (p.col - col) * (q.row - row) - (p.row - row) * (q.col - col), four columns at a time.
+__attribute__((target("avx2"))) inline __m256d weightTerm(const GridPoint& p, const GridPoint& q, __m256d cols,
+                                                          __m256d rows) {
+  return _mm256_sub_pd(
+      _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(p.col), cols), _mm256_sub_pd(_mm256_set1_pd(q.row), rows)),
+      _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(p.row), rows), _mm256_sub_pd(_mm256_set1_pd(q.col), cols)));
+}
+
+// forEachCoveredPixel's test of four pixels (columns col .. col + 3 of `row`) as its scalar
+// code computes it, operation for operation (AVX2 has no fused multiply-add): bit k set when
+// column col + k is covered.
+__attribute__((target("avx2"))) unsigned covered4(const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                                                  double area2, double eps, double col, double row) {
+  const __m256d cols = _mm256_add_pd(_mm256_set1_pd(col), _mm256_set_pd(3, 2, 1, 0));
+  const __m256d rows = _mm256_set1_pd(row);
+  const __m256d area = _mm256_set1_pd(area2), size = _mm256_set1_pd(std::fabs(area2));
+  const __m256d wa = _mm256_div_pd(weightTerm(b, c, cols, rows), area), wb = _mm256_div_pd(weightTerm(c, a, cols, rows), area);
+  const __m256d wc = _mm256_sub_pd(_mm256_sub_pd(_mm256_set1_pd(1.0), wa), wb);
+  const __m256d below = _mm256_set1_pd(-eps);
+  const __m256d outside =
+      _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(_mm256_mul_pd(wa, size), below, _CMP_LT_OQ),
+                                _mm256_cmp_pd(_mm256_mul_pd(wb, size), below, _CMP_LT_OQ)),
+                   _mm256_cmp_pd(_mm256_mul_pd(wc, size), below, _CMP_LT_OQ));
+  return static_cast<unsigned>(~_mm256_movemask_pd(outside)) & 15u;
+}
+#endif
+
+// Pixels [first, last] (indices, one row) meeting the triangle, appended in order.
+void rowMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, std::size_t first, std::size_t last,
+                std::vector<PixelOffset>& hits) {
+#if defined(__x86_64__)
+  if (kHasAvx2) {
+    // The last step reads up to three pixels past `last` (never kept): past the raster's end
+    // on its last row, DemOnGlobe's arrays hold kDemOnGlobePadding pixels more for that.
+    static_assert(kDemOnGlobePadding >= 3);
+    double offsets[4];
+    for (std::size_t i = first; i <= last; i += 4) {
+      unsigned met = meets4(globe, triangle, i, offsets);
+      if (last - i < 3) met &= (1u << (last - i + 1)) - 1;
+      for (; met != 0; met &= met - 1) {
+        const int lane = std::countr_zero(met);
+        hits.push_back({i + static_cast<std::size_t>(lane), offsets[lane]});
+      }
+    }
+    return;
+  }
+#endif
+  const double *x = globe.pointX(), *y = globe.pointY(), *z = globe.pointZ();
+  const double *up_x = globe.upX(), *up_y = globe.upY(), *up_z = globe.upZ();
+  for (std::size_t pixel = first; pixel <= last; ++pixel) {
+    double offset_m = 0;
+    if (triangle.meets(EcefPoint{x[pixel], y[pixel], z[pixel]}, UnitVector{up_x[pixel], up_y[pixel], up_z[pixel]},
+                       &offset_m)) {
+      hits.push_back({pixel, offset_m});
+    }
+  }
+}
+
 }  // namespace
 
-void ZoomSurface::include(std::size_t pixel, double offset_m) {
-  float low = static_cast<float>(offset_m), high = low;
-  if (low > offset_m) low = std::nextafter(low, -std::numeric_limits<float>::infinity());
-  if (high < offset_m) high = std::nextafter(high, std::numeric_limits<float>::infinity());
-  atomicImprove(low_[pixel], low, [](float a, float b) { return a < b; });
-  atomicImprove(high_[pixel], high, [](float a, float b) { return a > b; });
+void coveredValidPixels(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                        std::vector<std::uint32_t>& out) {
+#if defined(__x86_64__)
+  if (kHasAvx2) {
+    // forEachCoveredPixel's box and tolerance.
+    const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+    if (area2 == 0) return;
+    const double eps = 1e-9 * std::fabs(area2);
+    const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
+    const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
+    const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
+    const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
+    for (int row = min_row; row <= max_row; ++row) {
+      for (int col = min_col; col <= max_col; col += 4) {
+        unsigned inside = covered4(a, b, c, area2, eps, col, row);
+        if (max_col - col < 3) inside &= (1u << (max_col - col + 1)) - 1;
+        for (; inside != 0; inside &= inside - 1) {
+          const std::size_t pixel = dem.index(col + std::countr_zero(inside), row);
+          if (!std::isnan(dem.heights_m[pixel])) out.push_back(static_cast<std::uint32_t>(pixel));
+        }
+      }
+    }
+    return;
+  }
+#endif
+  forEachCoveredPixel(dem, a, b, c, [&](std::size_t pixel, double) {
+    if (!std::isnan(dem.heights_m[pixel])) out.push_back(static_cast<std::uint32_t>(pixel));
+    return true;
+  });
+}
+
+void pixelsMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const PixelBox& box,
+                   std::vector<PixelOffset>& hits) {
+  // forEachPixelMeeting's loops, a row's run of columns at a time.
+  if (triangle.degenerate()) return;
+  const DemGrid& dem = globe.dem();
+  const std::int32_t first_row = std::max(0, box.row0), last_row = std::min(dem.height - 1, box.row1);
+  if (box.col1 < box.col0) return;
+  for (std::int32_t row = first_row; row <= last_row; ++row) {
+    const std::size_t row_start = dem.index(0, row);
+    if (globe.wrapsLongitude()) {
+      // Columns modulo the width, in the order c = col0 .. col1: runs split at the seam.
+      for (std::int64_t c = box.col0; c <= box.col1;) {
+        std::int64_t col = c % dem.width;
+        if (col < 0) col += dem.width;
+        const std::int64_t run = std::min<std::int64_t>(box.col1 - c, dem.width - 1 - col);
+        rowMeeting(globe, triangle, row_start + static_cast<std::size_t>(col),
+                   row_start + static_cast<std::size_t>(col + run), hits);
+        c += run + 1;
+      }
+      continue;
+    }
+    const std::int64_t first_col = std::max<std::int64_t>(0, box.col0);
+    const std::int64_t last_col = std::min<std::int64_t>(dem.width - 1, box.col1);
+    if (first_col > last_col) continue;
+    rowMeeting(globe, triangle, row_start + static_cast<std::size_t>(first_col),
+               row_start + static_cast<std::size_t>(last_col), hits);
+  }
+}
+
+PixelBoxes::PixelBoxes(const DemOnGlobe& globe) : globe_(globe) {
+  const DemGrid& dem = globe.dem();
+  const std::int32_t bands = (dem.height + kBandRows - 1) / kBandRows;
+  bands_.resize(static_cast<std::size_t>(bands));
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  tbb::parallel_for(std::int32_t{0}, bands, [&](std::int32_t b) {
+    Band& band = bands_[static_cast<std::size_t>(b)];
+    double sin_low = kInfinity, sin_high = 0;
+    double row_low = kInfinity, row_high = -kInfinity, column_low = kInfinity, column_high = -kInfinity;
+    bool pole = false;
+    const double* up_z = globe.upZ();
+    for (std::int32_t row = b * kBandRows; row < std::min(dem.height, (b + 1) * kBandRows); ++row) {
+      pole = pole || globe.poleRow(row);
+      if (row < dem.height - 1) {
+        row_low = std::min(row_low, globe.rowSpacing(row));
+        row_high = std::max(row_high, globe.rowSpacing(row));
+      }
+      column_low = std::min(column_low, globe.columnSpacing(row));
+      column_high = std::max(column_high, globe.columnSpacing(row));
+      const std::size_t start = dem.index(0, row);
+      for (std::int32_t col = 0; col < dem.width; ++col) {
+        const double s = std::fabs(up_z[start + col]);
+        sin_low = std::min(sin_low, s);
+        sin_high = std::max(sin_high, s);
+      }
+    }
+    // As strayMargin computes it from a corner's sine: increasing in the sine.
+    const auto tanOf = [](double sin_lat) {
+      return std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
+    };
+    band.tan_lat_low = tanOf(sin_low);
+    band.tan_lat_high = tanOf(sin_high);
+    band.row_spacing_low_m = row_low;
+    band.row_spacing_high_m = row_high;
+    band.column_spacing_low_m = column_low;
+    band.column_spacing_high_m = column_high;
+    band.usable = !pole && row_low > 0 && std::isfinite(row_high) && column_low > 0 && std::isfinite(column_high) &&
+                  std::isfinite(band.tan_lat_low) && std::isfinite(band.tan_lat_high);
+  });
+}
+
+PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longest_edge_m, double shift_m) const {
+  const DemGrid& dem = globe_.dem();
+  double row_min = 1e300, row_max = -1e300, col_min = 1e300, col_max = -1e300;
+  for (const GridCorner& corner : corners) {
+    if (corner.at_pole) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+    row_min = std::min(row_min, corner.row);
+    row_max = std::max(row_max, corner.row);
+    col_min = std::min(col_min, corner.col);
+    col_max = std::max(col_max, corner.col);
+  }
+  if (!(col_min <= col_max) || !(row_min <= row_max)) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+  // strayMargin's rows (its corners' sines come from rows among them), by band; at least one
+  // of them has a row spacing (else its margin in rows is 0).
+  const auto first_row = static_cast<std::int32_t>(std::clamp(std::floor(row_min) - 1, 0.0, dem.height - 1.0));
+  const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
+  if (first_row >= dem.height - 1) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  double tan_low = kInfinity, tan_high = 0;
+  double row_low = kInfinity, row_high = 0, column_low = kInfinity, column_high = 0;
+  for (std::int32_t b = first_row / kBandRows; b <= last_row / kBandRows; ++b) {
+    const Band& band = bands_[static_cast<std::size_t>(b)];
+    if (!band.usable) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+    tan_low = std::min(tan_low, band.tan_lat_low);
+    tan_high = std::max(tan_high, band.tan_lat_high);
+    row_low = std::min(row_low, band.row_spacing_low_m);
+    row_high = std::max(row_high, band.row_spacing_high_m);
+    column_low = std::min(column_low, band.column_spacing_low_m);
+    column_high = std::max(column_high, band.column_spacing_high_m);
+  }
+  // strayMargin's arithmetic with the bounds in: each step is monotone, so its margins lie
+  // between these.
+  constexpr double kRadius_m = 6.3e6;  // strayMargin's
+  const auto marginOf = [&](double tan_lat) {
+    const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
+    return bulge_m + shift_m;
+  };
+  const double least_m = marginOf(tan_low), most_m = marginOf(tan_high);
+  const double least_rows = least_m / row_high, least_columns = least_m / column_high;
+  const double most_rows = most_m / row_low, most_columns = most_m / column_low;
+  if (!(least_rows >= 0 && least_columns >= 0 && most_rows < 1e9 && most_columns < 1e9)) {
+    return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+  }
+  // candidatePixels's box (no corner at a pole) for both margins: an edge is the same for
+  // both when the value rounded for the smaller margin rounds (up or down) to the value
+  // rounded for the larger one (every value between then rounds there too).
+  const double row_first_most = std::ceil(row_min - most_rows - 1e-9);
+  const double row_last_most = std::floor(row_max + most_rows + 1e-9);
+  const double col_first_most = std::ceil(col_min - most_columns - 1e-9);
+  const double col_last_most = std::floor(col_max + most_columns + 1e-9);
+  if (row_min - least_rows - 1e-9 <= row_first_most && row_max + least_rows + 1e-9 >= row_last_most &&
+      col_min - least_columns - 1e-9 <= col_first_most && col_max + least_columns + 1e-9 >= col_last_most) {
+    PixelBox out;
+    out.row0 = static_cast<std::int32_t>(std::max(0.0, row_first_most));
+    out.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, row_last_most));
+    double first = col_first_most, last = col_last_most;
+    if (last - first + 1 >= dem.width) {
+      first = 0;
+      last = dem.width - 1;
+    }
+    if (!globe_.wrapsLongitude()) {
+      first = std::max(first, 0.0);
+      last = std::min(last, dem.width - 1.0);
+    }
+    out.col0 = static_cast<std::int64_t>(first);
+    out.col1 = static_cast<std::int64_t>(last);
+    return out;
+  }
+  return candidatePixels(globe_, corners, longest_edge_m, shift_m);
 }
 
 DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
                                   double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
-                                  std::vector<std::uint32_t>* met) {
+                                  std::vector<std::uint32_t>* met, const PixelBoxes* boxes) {
   DrawnTileMeasure measure;
   const DemGrid& dem = globe.dem();
+  std::vector<PixelOffset> hits;
   for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
     const DrawnTriangle triangle(vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]);
     if (triangle.degenerate()) continue;
-    const PixelBox box =
-        candidatePixels(globe, {grid[indices[t]], grid[indices[t + 1]], grid[indices[t + 2]]}, triangle.longestEdge(), shift_m);
-    forEachPixelMeeting(globe, triangle, box, [&](std::size_t pixel, double offset_m) {
-      if (std::isnan(dem.heights_m[pixel])) return;
+    const std::array<GridCorner, 3> corners{grid[indices[t]], grid[indices[t + 1]], grid[indices[t + 2]]};
+    const PixelBox box = boxes ? boxes->box(corners, triangle.longestEdge(), shift_m)
+                               : candidatePixels(globe, corners, triangle.longestEdge(), shift_m);
+    hits.clear();
+    pixelsMeeting(globe, triangle, box, hits);
+    for (const auto& [pixel, offset_m] : hits) {
+      if (std::isnan(dem.heights_m[pixel])) continue;
       const double error = std::fabs(offset_m);
       measure.max_error_m = std::max(measure.max_error_m, error);
       ++measure.hits;
@@ -64,12 +352,63 @@ DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefP
       }
       if (surface) surface->include(pixel, offset_m);
       if (met) met->push_back(static_cast<std::uint32_t>(pixel));
-    });
+    }
   }
   return measure;
 }
 
-Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices) {
+void outlineEdges(std::span<const std::uint32_t> indices, std::size_t vertex_count, OutlineScratch& scratch,
+                  std::vector<std::array<std::uint32_t, 2>>& edges) {
+  edges.clear();
+  // Edges bucketed by their smaller vertex (a counting sort), each bucket holding the larger
+  // ones; a bucket is sorted on its own (a handful of edges, but thousands round a pole).
+  std::vector<std::uint32_t>& start = scratch.start;
+  std::vector<std::uint32_t>& other = scratch.other;
+  start.assign(vertex_count + 1, 0);
+  const std::size_t triangles = indices.size() / 3;
+  for (std::size_t t = 0; t < triangles; ++t) {
+    const std::uint32_t a = indices[3 * t], b = indices[3 * t + 1], c = indices[3 * t + 2];
+    ++start[std::min(a, b) + 1];
+    ++start[std::min(b, c) + 1];
+    ++start[std::min(c, a) + 1];
+  }
+  for (std::size_t v = 0; v < vertex_count; ++v) start[v + 1] += start[v];
+  other.resize(3 * triangles);
+  for (std::size_t t = 0; t < triangles; ++t) {
+    const std::uint32_t corner[3] = {indices[3 * t], indices[3 * t + 1], indices[3 * t + 2]};
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::uint32_t a = corner[k], b = corner[(k + 1) % 3];
+      other[start[std::min(a, b)]++] = std::max(a, b);
+    }
+  }
+  // start[v] now ends bucket v: bucket v is [start[v - 1], start[v]).
+  std::uint32_t begin = 0;
+  for (std::size_t v = 0; v < vertex_count; ++v) {
+    const std::uint32_t end = start[v];
+    std::uint32_t* first = other.data() + begin;
+    std::uint32_t* last = other.data() + end;
+    if (end - begin <= 16) {
+      for (std::uint32_t* i = first + 1; i < last; ++i) {  // insertion sort
+        const std::uint32_t value = *i;
+        std::uint32_t* j = i;
+        for (; j > first && *(j - 1) > value; --j) *j = *(j - 1);
+        *j = value;
+      }
+    } else {
+      std::sort(first, last);
+    }
+    for (std::uint32_t* i = first; i < last;) {
+      std::uint32_t* j = i + 1;
+      while (j < last && *j == *i) ++j;
+      if (j - i == 1) edges.push_back({static_cast<std::uint32_t>(v), *i});
+      i = j;
+    }
+    begin = end;
+  }
+}
+
+Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices,
+                   std::span<const GeodeticOfVertex> known) {
   Region region;
   std::vector<Geodetic> geodetic(vertices.size());
   std::vector<std::uint8_t> used(vertices.size(), 0);
@@ -82,7 +421,8 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   std::vector<std::size_t> poles;
   for (std::size_t v = 0; v < vertices.size(); ++v) {
     if (!used[v]) continue;
-    geodetic[v] = geodeticOf(vertices[v].x, vertices[v].y, vertices[v].z);
+    geodetic[v] = known.empty() ? geodeticOf(vertices[v].x, vertices[v].y, vertices[v].z)
+                                : Geodetic{known[v].lat_deg, known[v].lon_deg, known[v].h_m};
     geocentric_lat[v] = geocentric(vertices[v].x, vertices[v].y, vertices[v].z);
     if (std::fabs(geodetic[v].lat_deg) >= kPoleDeg) {
       poles.push_back(v);

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -20,40 +21,6 @@ constexpr int kErrorClasses = 10;
 ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition,
                       const TileFrame* frame, std::int32_t zoom, double error_scale_m, const ZoomSurface& surface,
                       int max_side_px) {
-  // Per DEM pixel: the cluster (or face) covering it, and the drawn surface's error. A pixel
-  // several faces cover shows the last of them (the largest face index: taken with an atomic
-  // maximum, the same for any thread count).
-  std::vector<std::uint32_t> last_face(dem.pixelCount(), 0);  // face + 1; 0: none
-  const auto& idx = mesh.triangle_indices;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangleCount(), 1024),
-                    [&](const tbb::blocked_range<std::size_t>& faces) {
-                      for (std::size_t f = faces.begin(); f < faces.end(); ++f) {
-                        const auto mark = static_cast<std::uint32_t>(f + 1);
-                        forEachCoveredPixel(dem, mesh.vertices[idx[3 * f]], mesh.vertices[idx[3 * f + 1]],
-                                            mesh.vertices[idx[3 * f + 2]], [&](std::size_t pixel, double) {
-                                              std::atomic_ref<std::uint32_t> slot(last_face[pixel]);
-                                              std::uint32_t seen = slot.load(std::memory_order_relaxed);
-                                              while (seen < mark &&
-                                                     !slot.compare_exchange_weak(seen, mark, std::memory_order_relaxed)) {
-                                              }
-                                              return true;
-                                            });
-                      }
-                    });
-  std::vector<std::int32_t> cluster(dem.pixelCount(), -1);
-  std::vector<float> error(dem.pixelCount(), std::nanf(""));
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, dem.pixelCount(), 1 << 14),
-                    [&](const tbb::blocked_range<std::size_t>& pixels) {
-                      for (std::size_t pixel = pixels.begin(); pixel < pixels.end(); ++pixel) {
-                        if (last_face[pixel] > 0) {
-                          cluster[pixel] = partition ? partition->cluster_of_face[last_face[pixel] - 1] : 0;
-                        }
-                        if (surface.drawn(pixel) && !std::isnan(dem.heights_m[pixel])) {
-                          error[pixel] = static_cast<float>(surface.error(pixel));
-                        }
-                      }
-                    });
-
   const int scale = std::max(1, static_cast<int>(std::ceil(static_cast<double>(std::max(dem.width, dem.height)) /
                                                            std::max(16, max_side_px))));
   const int width = (dem.width + scale - 1) / scale, height = (dem.height + scale - 1) / scale;
@@ -64,16 +31,74 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
   maps.clusters = RgbImage(width, height, 235);
   maps.error = RgbImage(width, height, 235);
 
-  // Map pixel -> the DEM pixel at its block's centre, and its tile.
+  // A map pixel shows the DEM pixel at its block's centre (the last block's centre clamped
+  // into the raster).
+  const auto centreCol = [&](int mx) { return std::min(dem.width - 1, mx * scale + scale / 2); };
+  const auto centreRow = [&](int my) { return std::min(dem.height - 1, my * scale + scale / 2); };
+  // The map pixels whose centres lie in [first, last] along one axis (centres ascend).
+  const auto centresWithin = [&](int first, int last, int count, auto centre) {
+    int lo = std::max(0, (first - scale / 2 + scale - 1) / scale);
+    if (first - scale / 2 < 0) lo = 0;
+    while (lo > 0 && centre(lo - 1) >= first) --lo;
+    while (lo < count && centre(lo) < first) ++lo;
+    int hi = lo;
+    while (hi < count && centre(hi) <= last) ++hi;
+    return std::array<int, 2>{lo, hi};  // [lo, hi)
+  };
+  // Per map pixel: the face covering its centre with the largest index (taken with an atomic
+  // maximum, the same for any thread count), by forEachCoveredPixel's test of the centres alone.
+  std::vector<std::uint32_t> last_face(static_cast<std::size_t>(width) * height, 0);  // face + 1; 0: none
+  const auto& idx = mesh.triangle_indices;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, mesh.triangleCount(), 4096), [&](const tbb::blocked_range<std::size_t>& faces) {
+        for (std::size_t f = faces.begin(); f < faces.end(); ++f) {
+          const GridPoint& a = mesh.vertices[idx[3 * f]];
+          const GridPoint& b = mesh.vertices[idx[3 * f + 1]];
+          const GridPoint& c = mesh.vertices[idx[3 * f + 2]];
+          const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+          if (area2 == 0) continue;
+          const double eps = 1e-9 * std::fabs(area2);
+          const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
+          const int max_col =
+              std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
+          const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
+          const int max_row =
+              std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
+          if (min_col > max_col || min_row > max_row) continue;
+          const auto rows = centresWithin(min_row, max_row, height, centreRow);
+          if (rows[0] >= rows[1]) continue;
+          const auto cols = centresWithin(min_col, max_col, width, centreCol);
+          const auto mark = static_cast<std::uint32_t>(f + 1);
+          for (int my = rows[0]; my < rows[1]; ++my) {
+            const double row = centreRow(my);
+            for (int mx = cols[0]; mx < cols[1]; ++mx) {
+              const double col = centreCol(mx);
+              const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
+              const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
+              const double wc = 1.0 - wa - wb;
+              if (wa * std::fabs(area2) < -eps || wb * std::fabs(area2) < -eps || wc * std::fabs(area2) < -eps) {
+                continue;
+              }
+              std::atomic_ref<std::uint32_t> slot(last_face[static_cast<std::size_t>(my) * width + mx]);
+              std::uint32_t seen = slot.load(std::memory_order_relaxed);
+              while (seen < mark && !slot.compare_exchange_weak(seen, mark, std::memory_order_relaxed)) {
+              }
+            }
+          }
+        }
+      });
+
+  // Map pixel -> its cluster and its tile.
   std::vector<std::int32_t> map_cluster(static_cast<std::size_t>(width) * height, -1);
   std::vector<GridPoint> centres;
   centres.reserve(map_cluster.size());
   for (int my = 0; my < height; ++my) {
     for (int mx = 0; mx < width; ++mx) {
-      const int col = std::min(dem.width - 1, mx * scale + scale / 2);
-      const int row = std::min(dem.height - 1, my * scale + scale / 2);
-      map_cluster[static_cast<std::size_t>(my) * width + mx] = cluster[dem.index(col, row)];
-      centres.push_back({static_cast<double>(col), static_cast<double>(row), 0});
+      const std::size_t i = static_cast<std::size_t>(my) * width + mx;
+      if (last_face[i] > 0) {
+        map_cluster[i] = partition ? partition->cluster_of_face[last_face[i] - 1] : 0;
+      }
+      centres.push_back({static_cast<double>(centreCol(mx)), static_cast<double>(centreRow(my)), 0});
     }
   }
   std::vector<TileKey> tile(map_cluster.size());
@@ -85,11 +110,13 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
   tbb::parallel_for(0, height, [&](int my) {
     for (int mx = 0; mx < width; ++mx) {
       const std::size_t i = static_cast<std::size_t>(my) * width + mx;
-      // The largest error in the block.
+      // The largest error in the block (of the valid pixels the zoom draws).
       float worst = std::nanf("");
       for (int row = my * scale; row < std::min(dem.height, (my + 1) * scale); ++row) {
         for (int col = mx * scale; col < std::min(dem.width, (mx + 1) * scale); ++col) {
-          const float e = error[dem.index(col, row)];
+          const std::size_t pixel = dem.index(col, row);
+          if (!surface.drawn(pixel) || std::isnan(dem.heights_m[pixel])) continue;
+          const auto e = static_cast<float>(surface.error(pixel));
           if (!std::isnan(e) && !(e <= worst)) worst = e;
         }
       }

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <filesystem>
 #include <cmath>
@@ -19,6 +20,10 @@
 #include <tuple>
 
 #include <nlohmann/json.hpp>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
@@ -36,6 +41,7 @@
 #include "src/pipeline/report_maps.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/pipeline/drawn_tiles.h"
+#include "src/pipeline/largest_first.h"
 #include "src/simplify/simplify_clusters.h"
 #include "src/tin/measure_tin.h"
 #include "src/geo/dem_on_globe.h"
@@ -143,18 +149,19 @@ std::vector<EcefPoint> levelNormals(const TinMesh& mesh, std::span<const EcefPoi
 }
 
 // The largest side of the ECEF box of the tiles' vertices: what their quantisation must span.
+// Tiles in parallel (a maximum: the same for any order).
 double widestTileExtent(const std::vector<PyramidTile>& tiles, std::span<const EcefPoint> ecef) {
-  double widest = 0;
-  for (const PyramidTile& tile : tiles) {
+  std::vector<double> widest(tiles.size(), 0.0);
+  tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
     EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-    for (std::uint32_t v : tile.triangle_indices) {
+    for (std::uint32_t v : tiles[i].triangle_indices) {
       const EcefPoint& p = ecef[v];
       lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
       hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
     }
-    widest = std::max({widest, hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-  }
-  return widest;
+    widest[i] = std::max({0.0, hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  });
+  return widest.empty() ? 0.0 : *std::max_element(widest.begin(), widest.end());
 }
 
 // One tile's content exactly as a decoder gives it back: every vertex at its position on the
@@ -171,50 +178,68 @@ struct DrawnContent {
 // Marks a level vertex not (yet) in the tile drawnContent is making.
 constexpr std::uint32_t kNotInTile = std::numeric_limits<std::uint32_t>::max();
 
-// local_of: scratch with an entry per level vertex (at least), every entry kNotInTile on entry;
-// left so on return. Vertices take their tile index in order of first appearance in the
-// tile's triangles; one whose snapped point equals an earlier one's is welded to it.
+// Per thread scratch for drawnContent, reused from tile to tile.
+struct ContentScratch {
+  // An entry per level vertex (at least), every entry kNotInTile between calls.
+  std::vector<std::uint32_t> local_of;
+  std::vector<std::uint32_t> seen;
+  std::vector<std::uint32_t> tile_vertex;
+  std::vector<std::uint32_t> slots;  // open addressing over snapped points: an index into seen
+};
+
+// The bits of a snapped point for hashing and equality as doubles (-0 is 0).
+std::uint64_t pointHash(const EcefPoint& p) {
+  const auto bits = [](double value) { return std::bit_cast<std::uint64_t>(value + 0.0); };
+  std::uint64_t h = bits(p.x) * 0x9E3779B97F4A7C15ull;
+  h = (h ^ (h >> 29) ^ bits(p.y)) * 0xBF58476D1CE4E5B9ull;
+  h = (h ^ (h >> 31) ^ bits(p.z)) * 0x94D049BB133111EBull;
+  return h ^ (h >> 32);
+}
+
+// Vertices take their tile index in order of first appearance in the tile's triangles; one
+// whose snapped point equals an earlier one's is welded to it (the first seen keeps its place
+// and the others take it; found by hashing, which gives what a stable sort by point did).
 DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
-                          std::span<const EcefPoint> normals, const DemOnGlobe& globe,
-                          std::vector<std::uint32_t>& local_of) {
+                          std::span<const EcefPoint> normals, const DemOnGlobe& globe, ContentScratch& scratch) {
   DrawnContent out;
   const auto& idx = tile.triangle_indices;
+  std::vector<std::uint32_t>& local_of = scratch.local_of;
   if (local_of.size() < mesh.vertices.size()) local_of.resize(mesh.vertices.size(), kNotInTile);
   // The level's vertices in order of first appearance (local_of: their place in it).
-  std::vector<std::uint32_t> seen;
+  std::vector<std::uint32_t>& seen = scratch.seen;
+  seen.clear();
   for (const std::uint32_t v : idx) {
     if (local_of[v] != kNotInTile) continue;
     local_of[v] = static_cast<std::uint32_t>(seen.size());
     seen.push_back(v);
   }
-  // Welds: among vertices whose snapped points are equal (as doubles: -0 is 0), the first seen
-  // keeps its place and the others take it.
-  std::vector<std::uint32_t> order(seen.size());
-  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
-  const auto point_less = [&](std::uint32_t i, std::uint32_t j) {
-    const EcefPoint& p = snapped[seen[i]];
-    const EcefPoint& q = snapped[seen[j]];
-    return std::tie(p.x, p.y, p.z) < std::tie(q.x, q.y, q.z);
-  };
-  std::stable_sort(order.begin(), order.end(), point_less);
-  std::vector<std::uint32_t> weld_to(seen.size());
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    const bool same_as_previous = k > 0 && !point_less(order[k - 1], order[k]);
-    weld_to[order[k]] = same_as_previous ? weld_to[order[k - 1]] : order[k];
-  }
-  std::vector<std::uint32_t> tile_vertex(seen.size());
+  std::size_t capacity = 16;
+  while (capacity < 2 * seen.size()) capacity *= 2;
+  std::vector<std::uint32_t>& slots = scratch.slots;
+  slots.assign(capacity, kNotInTile);
+  std::vector<std::uint32_t>& tile_vertex = scratch.tile_vertex;
+  tile_vertex.resize(seen.size());
   out.positions.reserve(seen.size());
   out.normals.reserve(seen.size());
   out.grid.reserve(seen.size());
   for (std::size_t i = 0; i < seen.size(); ++i) {
-    if (weld_to[i] != i) {
-      tile_vertex[i] = tile_vertex[weld_to[i]];  // seen earlier
-      continue;
-    }
     const std::uint32_t v = seen[i];
+    const EcefPoint& p = snapped[v];
+    std::size_t slot = pointHash(p) & (capacity - 1);
+    bool welded = false;
+    for (; slots[slot] != kNotInTile; slot = (slot + 1) & (capacity - 1)) {
+      const EcefPoint& q = snapped[seen[slots[slot]]];
+      if (p.x == q.x && p.y == q.y && p.z == q.z) {
+        tile_vertex[i] = tile_vertex[slots[slot]];  // seen earlier
+        welded = true;
+        break;
+      }
+    }
+    if (welded) continue;
+    slots[slot] = static_cast<std::uint32_t>(i);
     const GridPoint& g = mesh.vertices[v];
     tile_vertex[i] = static_cast<std::uint32_t>(out.positions.size());
-    out.positions.push_back(snapped[v]);
+    out.positions.push_back(p);
     out.normals.push_back(normals[v]);
     const bool at_pole = g.row == std::round(g.row) && g.row >= 0 && g.row < globe.dem().height &&
                          globe.poleRow(static_cast<std::int32_t>(g.row));
@@ -319,30 +344,38 @@ struct ZoomContent {
 };
 
 // Per vertex of a zoom's mesh: whether it is on the outline of some tile of the zoom (an
-// edge of one of the tile's triangles that no other of its triangles has).
+// edge of one of the tile's triangles that no other of its triangles has). Tiles in parallel.
 std::vector<std::uint8_t> outlineVertices(const ZoomContent& zoom) {
   std::vector<std::uint8_t> outline(zoom.mesh->vertices.size(), 0);
-  std::vector<std::uint64_t> edges;
-  for (const PyramidTile& tile : zoom.tiles) {
-    const auto& idx = tile.triangle_indices;
-    edges.clear();
-    for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-      for (std::size_t k = 0; k < 3; ++k) {
-        const std::uint32_t a = idx[t + k], b = idx[t + (k + 1) % 3];
-        edges.push_back((static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b));
+  struct Scratch {
+    ContentScratch numbering;  // local_of: the tile's own vertex numbers
+    std::vector<std::uint32_t> local;
+    OutlineScratch outline;
+    std::vector<std::array<std::uint32_t, 2>> edges;
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch;
+  tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
+    Scratch& s = scratch.local();
+    const auto& idx = zoom.tiles[i].triangle_indices;
+    std::vector<std::uint32_t>& local_of = s.numbering.local_of;
+    std::vector<std::uint32_t>& seen = s.numbering.seen;
+    if (local_of.size() < outline.size()) local_of.resize(outline.size(), kNotInTile);
+    seen.clear();
+    s.local.resize(idx.size());
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      const std::uint32_t v = idx[k];
+      if (local_of[v] == kNotInTile) {
+        local_of[v] = static_cast<std::uint32_t>(seen.size());
+        seen.push_back(v);
       }
+      s.local[k] = local_of[v];
     }
-    std::sort(edges.begin(), edges.end());
-    for (std::size_t i = 0; i < edges.size();) {
-      std::size_t j = i;
-      while (j < edges.size() && edges[j] == edges[i]) ++j;
-      if (j - i == 1) {
-        outline[edges[i] >> 32] = 1;
-        outline[edges[i] & 0xffffffffu] = 1;
-      }
-      i = j;
+    outlineEdges(s.local, seen.size(), s.outline, s.edges);
+    for (const auto& edge : s.edges) {
+      for (const std::uint32_t end : edge) std::atomic_ref<std::uint8_t>(outline[seen[end]]).store(1, std::memory_order_relaxed);
     }
-  }
+    for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
+  });
   return outline;
 }
 
@@ -392,7 +425,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   progress.endStage();
   // Every pixel's DEM point on the globe and its vertical: every error is measured on the
   // surface a renderer draws, along these.
-  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  std::optional<DemOnGlobe> globe_storage;  // let go before the report's check, which places the DEM itself
+  const DemOnGlobe& globe = globe_storage.emplace(dem, geoid ? &*geoid : nullptr, &progress);
   progress.note("placement: " + to_wgs84.pathDescription());
   for (const std::string& warning : to_wgs84.warnings()) progress.note("warning: " + warning);
   progress.note(geoid ? "heights: orthometric, geoid " + geoid->name
@@ -511,6 +545,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   glb.encoding_speed = options.draco_speed;
   glb.generator = std::string("terratiles ") + kVersion;
   summary.generator = glb.generator;
+  std::size_t total_tiles = 0;
+  for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
+  progress.beginStage("writing tiles", total_tiles);
   // The shared quantisation grid: --position-step, or the step at which the finest zoom's
   // widest tile takes --draco-position-bits.
   double base_step_m = options.position_step_m;
@@ -532,81 +569,93 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   std::vector<double> zoom_step_m(zoom_count);
   std::vector<std::vector<double>> vertex_step_m(zoom_count);
   {
-    std::vector<std::uint8_t> coarser_outline;
+    // Each zoom's outline and widest tile on its own (zooms in parallel), then the chain.
+    std::vector<std::vector<std::uint8_t>> outline(zoom_count);
+    std::vector<double> widest_m(zoom_count);
+    tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
+      outline[k] = outlineVertices(zooms[k]);
+      widest_m[k] = widestTileExtent(zooms[k].tiles, zooms[k].ecef);
+    });
     for (std::size_t k = 0; k < zoom_count; ++k) {
       const ZoomContent& zoom = zooms[k];
-      std::vector<std::uint8_t> outline = outlineVertices(zoom);
-      std::vector<double> inherited(zoom.mesh->vertices.size(), 0.0);
+      std::vector<double>& steps = vertex_step_m[k];
+      steps.assign(zoom.mesh->vertices.size(), 0.0);  // the inherited steps first
       double largest_inherited = 0;
       if (k > 0) {
         const ZoomContent& coarser = zooms[k - 1];
+        const std::vector<std::uint8_t>& coarser_outline = outline[k - 1];
         const std::vector<std::uint32_t>* map = zoom.index_in_coarser;
-        for (std::size_t v = 0; map && v < inherited.size(); ++v) {
+        for (std::size_t v = 0; map && v < steps.size(); ++v) {
           const std::uint32_t w = (*map)[v];
-          if (!outline[v] || w == kRemovedVertex || !coarser_outline[w]) continue;
+          if (!outline[k][v] || w == kRemovedVertex || !coarser_outline[w]) continue;
           const GridPoint& here = zoom.mesh->vertices[v];
           const GridPoint& there = coarser.mesh->vertices[w];
           if (here.col != there.col || here.row != there.row || here.height_m != there.height_m) continue;
-          inherited[v] = vertex_step_m[k - 1][w];
-          largest_inherited = std::max(largest_inherited, inherited[v]);
+          steps[v] = vertex_step_m[k - 1][w];
+          largest_inherited = std::max(largest_inherited, steps[v]);
         }
       }
       // A coarser snap moves a vertex by up to half that step: room for it in the extent.
-      zoom_step_m[k] =
-          sharedPositionStep(widestTileExtent(zoom.tiles, zoom.ecef) + 2 * largest_inherited, base_step_m, kMaxExactPositionBits);
-      vertex_step_m[k].resize(inherited.size());
-      for (std::size_t v = 0; v < inherited.size(); ++v) vertex_step_m[k][v] = std::max(zoom_step_m[k], inherited[v]);
-      coarser_outline = std::move(outline);
+      zoom_step_m[k] = sharedPositionStep(widest_m[k] + 2 * largest_inherited, base_step_m, kMaxExactPositionBits);
+      for (double& step : steps) step = std::max(zoom_step_m[k], step);
+      if (k > 0) outline[k - 1] = std::vector<std::uint8_t>();  // the chain needs only the last two
     }
   }
 
-  std::size_t total_tiles = 0;
-  for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
-  progress.beginStage("writing tiles", total_tiles);
   double widest_step_m = 0;
   std::vector<ZoomSummary> zoom_summaries(zoom_count);
   std::vector<ZoomMaps> maps(options.report ? zoom_count : 0);
-  // Per zoom and tile: its drawn content (until both its measure and its encoding are done)
-  // and what is written. Workers write into these pre-sized slots; the files are written from
-  // this thread in a fixed order, so the output is the same for any thread count.
-  struct TileWork {
-    DrawnContent content;
-    std::atomic<int> pending{2};  // the measure and the encoding
-    EncodedTile out;
-    void done() {
-      if (pending.fetch_sub(1) == 1) content = DrawnContent{};
-    }
+  // Per zoom and tile: what is written and what the tileset needs. Workers write into these
+  // pre-sized slots; the files are written in a fixed order.
+  std::vector<std::vector<EncodedTile>> written(zoom_count);
+  // Per zoom: its vertices snapped to their grids, and their normals (from the whole level).
+  struct ZoomVertices {
+    std::vector<EcefPoint> snapped;
+    std::vector<EcefPoint> normals;
+    double largest_step_m = 0;
   };
-  std::vector<std::vector<std::unique_ptr<TileWork>>> work(zoom_count);
+  const auto zoomVertices = [&](std::size_t k) {
+    const ZoomContent& level = zooms[k];
+    ZoomVertices out;
+    out.snapped.resize(level.ecef.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.snapped.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        for (std::size_t v = range.begin(); v < range.end(); ++v) {
+                          const double step = vertex_step_m[k][v];
+                          out.snapped[v] = {snapToStep(level.ecef[v].x, step), snapToStep(level.ecef[v].y, step),
+                                            snapToStep(level.ecef[v].z, step)};
+                        }
+                      });
+    out.largest_step_m =
+        vertex_step_m[k].empty() ? 0.0 : *std::max_element(vertex_step_m[k].begin(), vertex_step_m[k].end());
+    out.normals = levelNormals(*level.mesh, level.ecef);
+    return out;
+  };
   std::vector<GlbOptions> zoom_glb(zoom_count, glb);
-  tbb::enumerable_thread_specific<std::vector<std::uint32_t>> content_scratch;
-  // Encodings run in the background (they need no other zoom) while the zooms are measured
-  // one after the other. Declared after everything its tasks use: its destructor waits.
-  tbb::task_group encoding;
+  const PixelBoxes boxes(globe);
+  tbb::enumerable_thread_specific<ContentScratch> content_scratch;
+  // In the background: the next coarser zoom's vertices while a zoom's tiles are made; a
+  // zoom's files (one zoom after the other, in tile order) and its RMS error and maps while
+  // the next is made. Declared after everything their tasks use: their destructors wait.
+  tbb::task_group preparing, writing, finishing;
   try {
     // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
-    // drawn surface (where a viewer draws both), measured on that zoom's surface.
-    ZoomSurface finer_surface;
+    // drawn surface (where a viewer draws both), measured on that zoom's surface. Two
+    // surfaces' memory, taken in turn.
+    std::array<ZoomSurface, 2> surfaces{ZoomSurface(dem.pixelCount()), ZoomSurface(dem.pixelCount())};
+    ZoomVertices vertices = zoomVertices(zoom_count - 1), coarser_vertices;
     for (std::size_t k = zoom_count; k-- > 0;) {
+      if (k > 0) preparing.run([&, k] { coarser_vertices = zoomVertices(k - 1); });
       const ZoomContent& level = zooms[k];
-      std::vector<EcefPoint> snapped(level.ecef.size());
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, snapped.size(), 4096),
-                        [&](const tbb::blocked_range<std::size_t>& range) {
-                          for (std::size_t v = range.begin(); v < range.end(); ++v) {
-                            const double step = vertex_step_m[k][v];
-                            snapped[v] = {snapToStep(level.ecef[v].x, step), snapToStep(level.ecef[v].y, step),
-                                          snapToStep(level.ecef[v].z, step)};
-                          }
-                        });
-      const double largest_step_m =
-          vertex_step_m[k].empty() ? 0.0 : *std::max_element(vertex_step_m[k].begin(), vertex_step_m[k].end());
-      const std::vector<EcefPoint> normals = levelNormals(*level.mesh, level.ecef);
       zoom_glb[k].position_step_m = zoom_step_m[k];
       widest_step_m = std::max(widest_step_m, zoom_step_m[k]);
       // The grid positions measured from are those before the snap: a vertex moves by up to
       // sqrt(3)/2 of its step.
-      const double shift_m = 0.87 * largest_step_m;
-      ZoomSurface surface(dem.pixelCount());
+      const double shift_m = 0.87 * vertices.largest_step_m;
+      // The zoom two finer was the last to use this memory (its maps are drawn by now).
+      ZoomSurface& surface = surfaces[k % 2];
+      surface.clear();
+      const ZoomSurface* finer = k + 1 < zoom_count ? &surfaces[(k + 1) % 2] : nullptr;
       ZoomSummary& zoom_summary = zoom_summaries[k];
       zoom_summary.position_step_m = zoom_step_m[k];
       zoom_summary.zoom = level.zoom;
@@ -617,61 +666,79 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       zoom_summary.triangles = level.mesh->triangleCount();
       for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
 
-      std::vector<std::unique_ptr<TileWork>>& tiles = work[k];
+      // Every tile on its own: its drawn content, measured, bounded and encoded; the largest
+      // first.
+      std::vector<EncodedTile>& tiles = written[k];
       tiles.resize(level.tiles.size());
-      tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
-        tiles[i] = std::make_unique<TileWork>();
-        tiles[i]->content = drawnContent(level.tiles[i], *level.mesh, snapped, normals, globe, content_scratch.local());
+      std::vector<std::size_t> order(tiles.size());
+      for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+        return level.tiles[i].triangle_indices.size() > level.tiles[j].triangle_indices.size();
       });
-      for (std::size_t i = 0; i < tiles.size(); ++i) {
-        TileWork* tile = tiles[i].get();
-        const GlbOptions* tile_glb = &zoom_glb[k];
-        encoding.run([tile, tile_glb] {
-          tile->out.region = drawnRegion(tile->content.positions, tile->content.triangle_indices);
-          tile->out.vertices = tile->content.positions.size();
-          tile->out.glb = encodeContent(tile->content, *tile_glb, &tile->out.position_bits);
-          tile->done();
-        });
-      }
-      const ZoomSurface* finer = finer_surface.empty() ? nullptr : &finer_surface;
-      tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
-        TileWork& tile = *tiles[i];
-        tile.out.measure = measureDrawnTile(globe, tile.content.positions, tile.content.grid,
-                                            tile.content.triangle_indices, shift_m, finer, &surface);
-        tile.done();
+      forEachLargestFirst(order, [&](std::size_t i) {
+        const DrawnContent content =
+            drawnContent(level.tiles[i], *level.mesh, vertices.snapped, vertices.normals, globe, content_scratch.local());
+        EncodedTile& out = tiles[i];
+        out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
+                                       &surface, nullptr, &boxes);
+        out.region = drawnRegion(content.positions, content.triangle_indices);
+        out.vertices = content.positions.size();
+        out.glb = encodeContent(content, zoom_glb[k], &out.position_bits);
       });
-      for (const std::unique_ptr<TileWork>& tile : tiles) {
-        zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile->out.measure.max_error_m);
+      for (const EncodedTile& tile : tiles) {
+        zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile.measure.max_error_m);
+        zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile.position_bits);
       }
-      // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
-      double sum_squares = 0;
-      std::size_t drawn_pixels = 0;
-      for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
-        if (!surface.drawn(p)) continue;
-        sum_squares += surface.error(p) * surface.error(p);
-        ++drawn_pixels;
-      }
-      zoom_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
-      if (options.report) {
-        maps[k] = drawZoomMaps(dem, *level.mesh, level.map_clusters, frame.get(), level.zoom, zoom_summary.max_error_m,
-                               surface);
-      }
-      finer_surface = std::move(surface);
+      writing.wait();  // the finer zoom's files
+      writing.run([&, k] {
+        ZoomSummary& written_summary = zoom_summaries[k];
+        for (std::size_t i = 0; i < zooms[k].tiles.size(); ++i) {
+          EncodedTile& tile = written[k][i];
+          written_summary.bytes += output.writeFile(contentUri(zooms[k].tiles[i].key, options.implicit_tiling), tile.glb);
+          tile.glb = std::vector<std::uint8_t>();  // (= {} would keep its memory)
+        }
+      });
+      finishing.wait();  // the finer zoom's: done with its surface, which the next zoom takes
+      finishing.run([&, k] {
+        const ZoomSurface& drawn = surfaces[k % 2];
+        ZoomSummary& finished_summary = zoom_summaries[k];
+        // The zoom's RMS error over the DEM pixels it draws (each once, at its largest offset).
+        double sum_squares = 0;
+        std::size_t drawn_pixels = 0;
+        for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
+          if (!drawn.drawn(p)) continue;
+          sum_squares += drawn.error(p) * drawn.error(p);
+          ++drawn_pixels;
+        }
+        finished_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
+        if (options.report) {
+          const ZoomContent& finished = zooms[k];
+          maps[k] = drawZoomMaps(dem, *finished.mesh, finished.map_clusters, frame.get(), finished.zoom,
+                                 finished_summary.max_error_m, drawn);
+        }
+      });
+      preparing.wait();
+      vertices = std::move(coarser_vertices);
+      coarser_vertices = {};
       progress.advance(level.tiles.size());
     }
-    encoding.wait();
+    writing.wait();
+    finishing.wait();
   } catch (...) {
-    encoding.cancel();
-    encoding.wait();
+    preparing.cancel();
+    writing.cancel();
+    finishing.cancel();
+    preparing.wait();
+    writing.wait();
+    finishing.wait();
     throw;
   }
   std::map<std::tuple<int, int, int>, TileNode> nodes;  // (zoom, y, x) -> node
   for (std::size_t k = zoom_count; k-- > 0;) {
     const ZoomContent& level = zooms[k];
-    ZoomSummary& zoom_summary = zoom_summaries[k];
     for (std::size_t i = 0; i < level.tiles.size(); ++i) {
       const PyramidTile& tile = level.tiles[i];
-      const EncodedTile& tile_out = work[k][i]->out;
+      const EncodedTile& tile_out = written[k][i];
       TileNode node;
       node.key = tile.key;
       node.content_uri = contentUri(tile.key, options.implicit_tiling);
@@ -681,12 +748,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       // the same measure may differ by in its last bits.
       node.geometric_error_m =
           roundUpToMicrometre(std::max(tile_out.measure.max_error_m, tile_out.measure.finer_difference_m));
-      zoom_summary.bytes += output.writeFile(node.content_uri, tile_out.glb);
-      zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile_out.position_bits);
       nodes[{tile.key.zoom, tile.key.y, tile.key.x}] = std::move(node);
     }
-    work[k].clear();
   }
+  written = {};
   progress.endStage();
   for (const ZoomSummary& zoom_summary : zoom_summaries) {
     summary.tiles += zoom_summary.tiles;
@@ -697,6 +762,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     summary.zooms.push_back(zoom_summary);
   }
 
+  progress.beginStage("writing the tileset", 0);
   Tileset tileset;
   tileset.generator = glb.generator;
   tileset.root = buildTree(nodes);
@@ -774,14 +840,25 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   } else {
     summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
   }
+  progress.endStage();
   progress.throwIfCancelled();
 
   // The report: maps per zoom, the check of what was written, then report.json and .html.
   if (options.report) {
-    // The levels are written and drawn: free them before the check decodes every tile.
+    // The levels are written and drawn: free them (and the pixels on the globe) before the
+    // check decodes every tile.
+    progress.beginStage("letting the levels go", 0);
     zooms = {};
     levels = {};
     pyramid = {};
+    frame.reset();
+    globe_storage.reset();
+#if defined(__GLIBC__)
+    // glibc keeps most of what was freed (the levels' many mid-sized arrays) for reuse; the
+    // check does not reuse it: give it back.
+    malloc_trim(0);
+#endif
+    progress.endStage();
     std::optional<CheckReport> check;
     if (options.report_check_cuts > 0) {
       CheckOptions check_options;
@@ -790,14 +867,18 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       summary.check_ran = true;
       summary.check_ok = check->ok();
     }
+    progress.beginStage("writing the report", 0);
     summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const nlohmann::json report = buildReportJson(options, summary, progress.stages(), check, maps);
     summary.bytes += output.writeFile("report.json", report.dump(1) + "\n");
     summary.bytes += output.writeFile("report.html", renderReportHtml(report));
     summary.report_path = (std::filesystem::path(options.output_dir) / "report.html").string();
+    progress.endStage();
   }
   progress.throwIfCancelled();
+  progress.beginStage("moving the output into place", 0);
   output.commit();
+  progress.endStage();
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }

@@ -7,16 +7,23 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <random>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
+#include <bit>
 #include <string>
 #include <vector>
 
+#include "formats/dem/read_dem.h"
+#include "formats/geoid/read_geoid.h"
 #include "formats/gltf/read_glb.h"
 #include "formats/gltf/write_glb.h"
+#include "src/geo/drawn_pixels.h"
 #include "src/pipeline/check_output.h"
+#include "src/pipeline/drawn_tiles.h"
+#include "src/tin/measure_tin.h"
 #include "tests/test_support.h"
 #include "tileset/implicit_tileset.h"
 
@@ -58,9 +65,141 @@ std::array<double, 3> ecefOf(const GlbMesh& mesh, std::size_t v) {
           mesh.translation[1] + mesh.positions[3 * v + 1]};
 }
 
+// Random triangles over a DEM for the scans' tests: corners at pixel centres (as a TIN's),
+// just off them (as decoded), or anywhere, from a pixel across to a hundred.
+std::vector<std::array<GridPoint, 3>> randomTriangles(const DemGrid& dem, std::size_t count, std::uint32_t seed) {
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::vector<std::array<GridPoint, 3>> out;
+  for (std::size_t i = 0; i < count; ++i) {
+    const double size = std::pow(10.0, 2 * unit(random));
+    const double col = unit(random) * (dem.width - 1), row = unit(random) * (dem.height - 1);
+    const int kind = static_cast<int>(i % 3);
+    std::array<GridPoint, 3> corners;
+    for (GridPoint& corner : corners) {
+      double c = std::clamp(col + (unit(random) - 0.5) * size, 0.0, dem.width - 1.0);
+      double r = std::clamp(row + (unit(random) - 0.5) * size, 0.0, dem.height - 1.0);
+      if (kind < 2) c = std::round(c), r = std::round(r);
+      if (kind == 1) c += (unit(random) - 0.5) * 2e-4, r += (unit(random) - 0.5) * 2e-4;
+      const float h = dem.heightAt(static_cast<std::int32_t>(std::round(std::clamp(c, 0.0, dem.width - 1.0))),
+                                   static_cast<std::int32_t>(std::round(std::clamp(r, 0.0, dem.height - 1.0))));
+      corner = {c, r, std::isnan(h) ? 0.0 : static_cast<double>(h) + (unit(random) - 0.5) * 40};
+    }
+    out.push_back(corners);
+  }
+  return out;
+}
+
+// The fast scans of drawn_tiles.h against the reference ones they stand for, on a DEM.
+void checkScans(const DemGrid& dem, const GeoidGrid* geoid) {
+  const DemOnGlobe globe(dem, geoid);
+  const PixelBoxes boxes(globe);
+  std::size_t met = 0, covered = 0, triangles = 0;
+  for (const auto& corners : randomTriangles(dem, 3000, 7)) {
+    std::array<EcefPoint, 3> ecef;
+    for (std::size_t k = 0; k < 3; ++k) ecef[k] = globe.place(corners[k]);
+    const DrawnTriangle triangle(ecef[0], ecef[1], ecef[2]);
+    if (triangle.degenerate()) continue;
+    ++triangles;
+    const auto gridCorner = [&](const GridPoint& p) {
+      const bool at_pole = p.row == std::round(p.row) && globe.poleRow(static_cast<std::int32_t>(p.row));
+      return GridCorner{p.col, p.row, at_pole};
+    };
+    const std::array<GridCorner, 3> grid{gridCorner(corners[0]), gridCorner(corners[1]), gridCorner(corners[2])};
+    for (const double shift_m : {0.0, 1e-3, 0.0068}) {
+      const PixelBox expected = candidatePixels(globe, grid, triangle.longestEdge(), shift_m);
+      const PixelBox box = boxes.box(grid, triangle.longestEdge(), shift_m);
+      REQUIRE(box.row0 == expected.row0);
+      REQUIRE(box.row1 == expected.row1);
+      REQUIRE(box.col0 == expected.col0);
+      REQUIRE(box.col1 == expected.col1);
+      std::vector<PixelOffset> reference, fast;
+      forEachPixelMeeting(globe, triangle, expected, [&](std::size_t pixel, double offset_m) {
+        reference.push_back({pixel, offset_m});
+      });
+      pixelsMeeting(globe, triangle, box, fast);
+      REQUIRE(fast.size() == reference.size());
+      for (std::size_t i = 0; i < fast.size(); ++i) {
+        REQUIRE(fast[i].pixel == reference[i].pixel);
+        REQUIRE(std::bit_cast<std::uint64_t>(fast[i].offset_m) == std::bit_cast<std::uint64_t>(reference[i].offset_m));
+      }
+      met += fast.size();
+    }
+    std::vector<std::uint32_t> reference, fast;
+    forEachCoveredPixel(dem, corners[0], corners[1], corners[2], [&](std::size_t pixel, double) {
+      if (!std::isnan(dem.heights_m[pixel])) reference.push_back(static_cast<std::uint32_t>(pixel));
+      return true;
+    });
+    coveredValidPixels(dem, corners[0], corners[1], corners[2], fast);
+    REQUIRE(fast == reference);
+    covered += fast.size();
+  }
+  MESSAGE(triangles << " triangles: " << met << " pixels met, " << covered << " covered");
+  CHECK(met > 10000);
+  CHECK(covered > 10000);
+}
+
 }  // namespace
 
 TEST_SUITE("check") {
+  TEST_CASE("the check's and the build's fast scans find the reference scans' pixels and offsets bit for bit") {
+    const GeoidGrid swiss = readGeoidGrid(test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif"));
+    checkScans(readDem({test::sharedData("ch_dhm25_interlaken_25m_2056.tif")}), &swiss);
+    checkScans(readDem({test::sharedData("srtm3_N57E011_4326.tif")}), nullptr);
+    checkScans(readDem({test::sharedData("ca_on_lidar_dtm_1m_26917.tif")}), nullptr);
+    // The whole globe (ETOPO5 at every sixth pixel: half a degree; columns wrap, pole rows,
+    // long chords) with a patch of nodata.
+    const DemGrid etopo = readDem({test::sharedData("etopo5_global_4326.tif")});
+    constexpr int kStep = 6;
+    DemGrid globe = etopo;
+    globe.width = (etopo.width + kStep - 1) / kStep;
+    globe.height = (etopo.height + kStep - 1) / kStep;
+    globe.pixel_size_x = etopo.pixel_size_x * kStep;
+    globe.pixel_size_y = etopo.pixel_size_y * kStep;
+    globe.origin_x = etopo.pixelCentre(0, 0).x - globe.pixel_size_x / 2;
+    globe.origin_y = etopo.pixelCentre(0, 0).y + globe.pixel_size_y / 2;
+    globe.heights_m.assign(globe.pixelCount(), DemGrid::kNoData);
+    for (int row = 0; row < globe.height; ++row) {
+      for (int col = 0; col < globe.width; ++col) {
+        const bool patch = col > 100 && col < 140 && row > 50 && row < 90;
+        if (!patch) globe.heights_m[globe.index(col, row)] = etopo.heightAt(col * kStep, row * kStep);
+      }
+    }
+    checkScans(globe, nullptr);
+  }
+
+  TEST_CASE("outline edges are the edges exactly one triangle has in ascending order") {
+    std::mt19937 random(3);
+    OutlineScratch scratch;
+    std::vector<std::array<std::uint32_t, 2>> edges;
+    for (int round = 0; round < 200; ++round) {
+      const std::uint32_t vertices = 3 + random() % 60;
+      std::vector<std::uint32_t> indices;
+      for (std::uint32_t t = random() % 80; t-- > 0;) {
+        for (int k = 0; k < 3; ++k) indices.push_back(static_cast<std::uint32_t>(random() % vertices));
+      }
+      // Reference: sorted (smaller, larger) keys, those that occur once.
+      std::vector<std::uint64_t> keys;
+      for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+        for (std::size_t k = 0; k < 3; ++k) {
+          const std::uint32_t a = indices[t + k], b = indices[t + (k + 1) % 3];
+          keys.push_back((static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b));
+        }
+      }
+      std::sort(keys.begin(), keys.end());
+      std::vector<std::array<std::uint32_t, 2>> expected;
+      for (std::size_t i = 0; i < keys.size();) {
+        std::size_t j = i;
+        while (j < keys.size() && keys[j] == keys[i]) ++j;
+        if (j - i == 1) expected.push_back({static_cast<std::uint32_t>(keys[i] >> 32), static_cast<std::uint32_t>(keys[i])});
+        i = j;
+      }
+      outlineEdges(indices, vertices, scratch, edges);
+      REQUIRE(edges == expected);
+    }
+  }
+
+
   TEST_CASE("merge tiles of four real rasters in the three schemes pass the check") {
     test::TempDir dir;
     test::checkSeamless(buildAndCheck("ch_dhm25_interlaken_25m_2056.tif", {}, dir, "interlaken_webmercator"));
