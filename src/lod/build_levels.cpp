@@ -35,6 +35,26 @@ void checkOptions(const LevelOptions& options) {
     usage("--level-error-growth must be >= 1, found " + std::to_string(options.level_error_growth));
   }
   if (options.coarser_levels < 0) usage("the number of levels must be >= 0");
+  if (options.region_clusters < 0) usage("the clusters per partition region must be >= 0 (0: global), found " + std::to_string(options.region_clusters));
+}
+
+// The level's regions for partitionFaces (LevelOptions::partition_regions, region_clusters),
+// or none: METIS over whole components.
+std::vector<std::int32_t> partitionRegions(const LevelOptions& options, const TinMesh& mesh, std::size_t level,
+                                           std::int32_t clusters) {
+  if (options.partition_regions) return options.partition_regions(mesh, level);
+  if (options.region_clusters <= 0 || clusters <= options.region_clusters || mesh.vertices.empty()) return {};
+  double min_col = 1e300, min_row = 1e300, max_col = -1e300, max_row = -1e300;
+  for (const GridPoint& v : mesh.vertices) {
+    min_col = std::min(min_col, v.col);
+    max_col = std::max(max_col, v.col);
+    min_row = std::min(min_row, v.row);
+    max_row = std::max(max_row, v.row);
+  }
+  const double area_px = std::max(1.0, (max_col - min_col) * (max_row - min_row));
+  const double cell_px = std::sqrt(area_px * options.region_clusters / clusters);
+  const double offset_px = level % 2 == 1 ? cell_px / 2 : 0;
+  return gridCellRegions(mesh, cell_px, {min_col - offset_px, min_row - offset_px});
 }
 
 }  // namespace
@@ -132,7 +152,8 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     partition_options.clusters = clustersFor(options, l, triangles);
     partition_options.seed = options.seed + static_cast<std::uint32_t>(l);
     if (options.repartition || l == 0) {
-      level.partition = partitionFaces(graph, partition_options);
+      const std::vector<std::int32_t> regions = partitionRegions(options, level.mesh, l, partition_options.clusters);
+      level.partition = partitionFaces(graph, partition_options, regions);
       if (options.regroup_clusters) level.partition = options.regroup_clusters(level.mesh, l, level.partition);
     } else {
       level.partition = std::move(inherited);

@@ -500,6 +500,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   build_command->add_flag("--no-join-tile-clusters", [&build](std::int64_t) { build.join_tile_clusters = false; },
                           "merge: keep every METIS cluster border locked, instead of simplifying the clusters that "
                           "cross the same tiles as one (paper fig 34)");
+  std::string build_partition = "regional";
+  build_command
+      ->add_option("--partition", build_partition,
+                   "How METIS sees a level: regional (per tile neighbourhood, in parallel) or global (one k-way call "
+                   "over the whole level, seconds for thousands of clusters; for comparison)")
+      ->check(CLI::IsMember({"regional", "global"}))
+      ->capture_default_str();
   build_command
       ->add_option("--clusters-per-tile", build.clusters_per_tile,
                    "Clusters a level is split into per tile of its zoom (paper: about 4); more make thinner "
@@ -758,6 +765,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   if (build_command->parsed()) {
     build.lod = lod_choice == "grid" ? LodMethod::Grid : LodMethod::Clusters;
     build.simplifier = parseSimplifier(build_simplifier);
+    build.global_partition = build_partition == "global";
     build.scheme = parseTileSchemeKind(scheme_choice);
     build.assignment = parseAssignment(assign_choice);
     if (build_heights.heights == "ellipsoidal") {
