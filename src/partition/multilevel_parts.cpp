@@ -3,6 +3,7 @@
 #include <metis.h>
 
 #include <algorithm>
+#include <span>
 #include <string>
 
 #include "src/base/error.h"
@@ -14,15 +15,23 @@ static_assert(sizeof(idx_t) == sizeof(std::int32_t), "METIS built with 32-bit id
 
 using Level = MultilevelScratch::Level;
 
+// A level as coarsen and refineParts read it: the piece itself (weights 1) or a coarsened one.
+struct LevelView {
+  std::span<const std::int32_t> xadj, adjncy, adjwgt, vwgt;
+  std::size_t size() const { return xadj.size() - 1; }
+};
+
+LevelView viewOf(const Level& level) { return {level.xadj, level.adjncy, level.adjwgt, level.vwgt}; }
+
 // One level of coarsening: a greedy heavy-edge matching in vertex order (each unmatched
 // vertex takes the unmatched neighbour it shares the heaviest edge with; ties: the lighter
 // neighbour, then the lower id), then every vertex left single joins the group of the
 // neighbour it shares the heaviest edge with (ties: the lighter group, then the lower id), so
 // but for isolated vertices every group holds two or more. No group outweighs max_weight.
-// Groups are connected, numbered as they form. Fills fine.coarse_of and `coarse`. O(E).
-void coarsen(Level& fine, std::int32_t max_weight, Level& coarse, MultilevelScratch& scratch) {
+// Groups are connected, numbered as they form. Fills coarse_of and `coarse`. O(E).
+void coarsen(const LevelView& fine, std::int32_t max_weight, std::vector<std::int32_t>& coarse_of, Level& coarse,
+             MultilevelScratch& scratch) {
   const std::size_t n = fine.size();
-  std::vector<std::int32_t>& coarse_of = fine.coarse_of;
   coarse_of.assign(n, -1);
   std::vector<std::int32_t>& group_weight = coarse.vwgt;
   group_weight.clear();
@@ -115,7 +124,7 @@ void coarsen(Level& fine, std::int32_t max_weight, Level& coarse, MultilevelScra
 // it shares the most edge weight with when that is more than it shares with its own part (the
 // cut falls), the other part stays within max_part_weight and its own part keeps some weight.
 // Two sweeps in vertex order at most. May disconnect a part (joinOrphans mends that).
-void refineParts(const Level& level, std::int32_t parts, std::int64_t max_part_weight, std::vector<std::int32_t>& part,
+void refineParts(const LevelView& level, std::int32_t parts, std::int64_t max_part_weight, std::vector<std::int32_t>& part,
                  MultilevelScratch& scratch) {
   const std::size_t n = level.size();
   std::vector<std::int64_t>& weight = scratch.weight;
@@ -302,22 +311,28 @@ void multilevelParts(const PieceGraph& piece, std::int32_t parts, std::uint32_t 
   const std::size_t n = piece.size();
   TERRATILES_ASSERT(parts >= 1 && static_cast<std::size_t>(parts) <= n);
   // Groups up to a quarter of a part, so METIS can still balance the parts; coarsening ends at
-  // about 16 vertices per part, or when a level shrinks the graph by less than a tenth.
+  // about 8 vertices per part, or when a level shrinks the graph by less than a tenth.
   const auto max_group = static_cast<std::int32_t>(std::max<std::size_t>(2, n / static_cast<std::size_t>(parts) / 4));
-  const std::size_t target = 16 * static_cast<std::size_t>(parts);
+  const std::size_t target = 8 * static_cast<std::size_t>(parts);
   std::vector<Level>& levels = scratch.levels;
   if (levels.empty()) levels.resize(1);
-  Level& faces = levels[0];
-  faces.xadj = piece.xadj;
-  faces.adjncy = piece.adjncy;
-  faces.adjwgt.assign(piece.adjncy.size(), 1);
-  faces.vwgt.assign(n, 1);
+  if (scratch.ones.size() < piece.adjncy.size()) scratch.ones.assign(piece.adjncy.size(), 1);
+  const std::span<const std::int32_t> ones(scratch.ones);
+  const auto view = [&](std::size_t level) {
+    return level == 0 ? LevelView{piece.xadj, piece.adjncy, ones.first(piece.adjncy.size()), ones.first(n)} : viewOf(levels[level]);
+  };
   std::size_t depth = 0;  // the coarsest level built
-  while (levels[depth].size() > target) {
+  while (view(depth).size() > target) {
     if (levels.size() < depth + 2) levels.resize(depth + 2);
-    coarsen(levels[depth], max_group, levels[depth + 1], scratch);
-    if (levels[depth + 1].size() * 10 > levels[depth].size() * 9) break;
+    coarsen(view(depth), max_group, levels[depth].coarse_of, levels[depth + 1], scratch);
+    if (levels[depth + 1].size() * 10 > view(depth).size() * 9) break;
     ++depth;
+  }
+  if (depth == 0) {  // too small to coarsen: METIS on the faces
+    levels[0].xadj = piece.xadj;
+    levels[0].adjncy = piece.adjncy;
+    levels[0].adjwgt.assign(piece.adjncy.size(), 1);
+    levels[0].vwgt.assign(n, 1);
   }
   Level& coarsest = levels[depth];
   const std::size_t coarse_n = coarsest.size();
@@ -352,7 +367,7 @@ void multilevelParts(const PieceGraph& piece, std::int32_t parts, std::uint32_t 
     finer.resize(coarse_of.size());
     for (std::size_t u = 0; u < coarse_of.size(); ++u) finer[u] = part[static_cast<std::size_t>(coarse_of[u])];
     part.swap(finer);
-    if (level > 0) refineParts(levels[level], parts, max_weight, part, scratch);
+    if (level > 0) refineParts(view(level), parts, max_weight, part, scratch);
   }
   joinOrphans(piece, parts, part, scratch);
   smoothParts(piece, parts, max_weight, part, scratch);

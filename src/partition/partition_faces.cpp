@@ -54,10 +54,13 @@ namespace {
 
 static_assert(sizeof(idx_t) == sizeof(std::int32_t), "METIS built with 32-bit idx_t expected");
 
-// The faces of one piece as a graph of its own (local ids: positions in `faces`).
+// The faces of one piece as a graph of its own (local ids: positions in `faces`). A face is in
+// the piece when it has the piece's number and (given regions) its region.
 void pieceGraph(const FaceGraph& graph, std::span<const std::int32_t> faces, const std::vector<std::int32_t>& piece_of_face,
-                const std::vector<std::int32_t>& local_of_face, detail::PieceGraph& piece) {
+                std::span<const std::int32_t> region_of_face, const std::vector<std::int32_t>& local_of_face,
+                detail::PieceGraph& piece) {
   const auto piece_id = piece_of_face[static_cast<std::size_t>(faces.front())];
+  const std::int32_t region = region_of_face.empty() ? 0 : region_of_face[static_cast<std::size_t>(faces.front())];
   piece.xadj.resize(faces.size() + 1);
   piece.xadj[0] = 0;
   piece.adjncy.clear();
@@ -66,7 +69,9 @@ void pieceGraph(const FaceGraph& graph, std::span<const std::int32_t> faces, con
     const auto t = static_cast<std::size_t>(faces[i]);
     for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
       const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-      if (piece_of_face[other] == piece_id) piece.adjncy.push_back(local_of_face[other]);  // not across pieces
+      if ((region_of_face.empty() || region_of_face[other] == region) && piece_of_face[other] == piece_id) {
+        piece.adjncy.push_back(local_of_face[other]);  // not across pieces
+      }
     }
     piece.xadj[i + 1] = static_cast<std::int32_t>(piece.adjncy.size());
   }
@@ -180,73 +185,6 @@ void facesByPiece(const std::vector<std::int32_t>& piece_of_face, std::int32_t p
   }
 }
 
-// Joins every piece smaller than min_faces to the neighbouring piece it shares the most edges
-// with (lowest piece on ties), then renumbers the pieces in order of their lowest face.
-std::int32_t joinSmallPieces(const FaceGraph& graph, std::size_t min_faces, std::int32_t pieces,
-                             std::vector<std::int32_t>& piece_of_face) {
-  std::vector<std::int32_t> size(static_cast<std::size_t>(pieces), 0);
-  for (const std::int32_t p : piece_of_face) ++size[static_cast<std::size_t>(p)];
-  // The faces of the small pieces only, grouped by piece.
-  std::vector<std::int32_t> small_first(static_cast<std::size_t>(pieces) + 1, 0);
-  for (std::size_t p = 0; p < size.size(); ++p) {
-    small_first[p + 1] = small_first[p] + (static_cast<std::size_t>(size[p]) < min_faces ? size[p] : 0);
-  }
-  if (small_first.back() == 0) return pieces;
-  std::vector<std::int32_t> small_faces(static_cast<std::size_t>(small_first.back()));
-  {
-    std::vector<std::int32_t> fill(small_first.begin(), small_first.end() - 1);
-    for (std::size_t t = 0; t < piece_of_face.size(); ++t) {
-      const auto p = static_cast<std::size_t>(piece_of_face[t]);
-      if (static_cast<std::size_t>(size[p]) < min_faces) small_faces[static_cast<std::size_t>(fill[p]++)] = static_cast<std::int32_t>(t);
-    }
-  }
-  std::vector<std::int32_t> parent(static_cast<std::size_t>(pieces));
-  std::iota(parent.begin(), parent.end(), 0);
-  const auto root = [&](std::int32_t p) {
-    while (parent[static_cast<std::size_t>(p)] != p) {
-      p = parent[static_cast<std::size_t>(p)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(p)])];
-    }
-    return p;
-  };
-  std::vector<std::int32_t> shared(static_cast<std::size_t>(pieces), 0), touched;
-  bool joined = false;
-  for (std::int32_t p = 0; p < pieces; ++p) {
-    const auto begin = static_cast<std::size_t>(small_first[static_cast<std::size_t>(p)]);
-    const auto end = static_cast<std::size_t>(small_first[static_cast<std::size_t>(p) + 1]);
-    if (begin == end) continue;
-    for (std::size_t i = begin; i < end; ++i) {
-      const auto t = static_cast<std::size_t>(small_faces[i]);
-      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
-        const std::int32_t q = piece_of_face[static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)])];
-        if (q == p) continue;
-        if (shared[static_cast<std::size_t>(q)]++ == 0) touched.push_back(q);
-      }
-    }
-    std::int32_t best = -1;
-    for (const std::int32_t q : touched) {
-      if (best < 0 || shared[static_cast<std::size_t>(q)] > shared[static_cast<std::size_t>(best)] ||
-          (shared[static_cast<std::size_t>(q)] == shared[static_cast<std::size_t>(best)] && q < best)) {
-        best = q;
-      }
-    }
-    for (const std::int32_t q : touched) shared[static_cast<std::size_t>(q)] = 0;
-    touched.clear();
-    if (best < 0) continue;  // a component of its own
-    const std::int32_t a = root(p), b = root(best);
-    if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
-    joined = true;
-  }
-  if (!joined) return pieces;
-  std::vector<std::int32_t> renumbered(static_cast<std::size_t>(pieces), -1);
-  std::int32_t count = 0;
-  for (std::int32_t& p : piece_of_face) {
-    std::int32_t& id = renumbered[static_cast<std::size_t>(root(p))];
-    if (id < 0) id = count++;
-    p = id;
-  }
-  return count;
-}
-
 }  // namespace
 
 namespace detail {
@@ -275,33 +213,15 @@ bool metisRandomIsPerThread() {
 
 }  // namespace detail
 
-FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& options,
-                             std::span<const std::int32_t> region_of_face) {
-  if (options.clusters < 1) {
-    throw Error(ErrorCode::Usage, "the number of clusters is " + std::to_string(options.clusters) +
-                                      "; expected at least 1");
-  }
+namespace {
+
+// partitionFaces over whole components (no regions): one METIS k-way (or random) call per
+// connected component, ids component by component.
+FacePartition globalPartition(const FaceGraph& graph, const PartitionOptions& options) {
   const std::size_t face_count = graph.faceCount();
-  const bool regional = !region_of_face.empty();
-  if (regional) {
-    if (region_of_face.size() != face_count) {
-      throw Error(ErrorCode::Usage, "partition regions are given for " + std::to_string(region_of_face.size()) +
-                                        " faces; expected one per face (" + std::to_string(face_count) + ")");
-    }
-    const auto lowest = std::min_element(region_of_face.begin(), region_of_face.end());
-    if (*lowest < 0) {
-      throw Error(ErrorCode::Usage, "partition region of face " + std::to_string(lowest - region_of_face.begin()) +
-                                        " is " + std::to_string(*lowest) + "; expected a region id >= 0");
-    }
-  }
   FacePartition result;
-  if (face_count == 0) return result;
   std::vector<std::int32_t> piece_of_face;
-  std::int32_t pieces = connectedPieces(graph, region_of_face, piece_of_face);
-  if (regional) {
-    const double faces_per_cluster = static_cast<double>(face_count) / static_cast<double>(options.clusters);
-    pieces = joinSmallPieces(graph, static_cast<std::size_t>(std::ceil(faces_per_cluster / 2)), pieces, piece_of_face);
-  }
+  const std::int32_t pieces = connectedPieces(graph, {}, piece_of_face);
   std::vector<std::int32_t> first, faces, local_of_face;
   facesByPiece(piece_of_face, pieces, first, faces, local_of_face);
   const auto facesOf = [&](std::size_t p) {
@@ -314,58 +234,26 @@ FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& opt
                          static_cast<double>(face_count);
     parts_of[p] = static_cast<std::int32_t>(std::clamp<double>(std::round(share), 1.0, static_cast<double>(facesOf(p).size())));
   }
-
   // Every face's part within its piece goes into result.cluster_of_face, then is renumbered.
   detail::assignOnHugePages(result.cluster_of_face, face_count, 0);
   const auto scatter = [&](std::size_t p, const std::vector<std::int32_t>& part) {
     const auto piece_faces = facesOf(p);
     for (std::size_t i = 0; i < piece_faces.size(); ++i) result.cluster_of_face[static_cast<std::size_t>(piece_faces[i])] = part[i];
   };
-  if (options.method == Partitioner::Random) {
-    std::mt19937 random(options.seed);  // one generator, pieces in order
-    detail::PieceGraph piece;
-    std::vector<std::int32_t> part;
-    for (std::size_t p = 0; p < parts_of.size(); ++p) {
-      if (parts_of[p] == 1) continue;
-      pieceGraph(graph, facesOf(p), piece_of_face, local_of_face, piece);
+  std::mt19937 random(options.seed);  // one generator, pieces in order
+  detail::PieceGraph piece;
+  std::vector<std::int32_t> part;
+  for (std::size_t p = 0; p < parts_of.size(); ++p) {
+    if (parts_of[p] == 1) continue;
+    pieceGraph(graph, facesOf(p), piece_of_face, {}, local_of_face, piece);
+    if (options.method == Partitioner::Random) {
       randomParts(piece, parts_of[p], random, part);
-      scatter(p, part);
-    }
-  } else {
-    // Largest pieces first, so the last tasks are short.
-    std::vector<std::int32_t> order;
-    for (std::size_t p = 0; p < parts_of.size(); ++p) {
-      if (parts_of[p] > 1) order.push_back(static_cast<std::int32_t>(p));
-    }
-    std::stable_sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) {
-      return facesOf(static_cast<std::size_t>(a)).size() > facesOf(static_cast<std::size_t>(b)).size();
-    });
-    struct Work {
-      detail::PieceGraph piece;
-      std::vector<std::int32_t> part;
-      detail::MultilevelScratch scratch;
-    };
-    tbb::enumerable_thread_specific<Work> work;
-    const auto partitionPiece = [&](std::size_t i) {
-      const auto p = static_cast<std::size_t>(order[i]);
-      Work& mine = work.local();
-      pieceGraph(graph, facesOf(p), piece_of_face, local_of_face, mine.piece);
-      if (regional) {
-        detail::multilevelParts(mine.piece, parts_of[p], options.seed, mine.part, mine.scratch);
-      } else {
-        metisKway(mine.piece, parts_of[p], options.seed, mine.part);
-      }
-      scatter(p, mine.part);
-    };
-    if (order.size() > 1 && detail::metisRandomIsPerThread()) {
-      tbb::parallel_for(std::size_t{0}, order.size(), partitionPiece, tbb::simple_partitioner());
     } else {
-      for (std::size_t i = 0; i < order.size(); ++i) partitionPiece(i);
+      metisKway(piece, parts_of[p], options.seed, part);
     }
+    scatter(p, part);
   }
-
-  // Dense ids: piece by piece, in order of first appearance within the piece; a part left
-  // empty gets none.
+  // Dense ids: piece by piece, in order of first appearance within the piece.
   std::int32_t next_id = 0;
   std::vector<std::int32_t> id_of_part;
   for (std::size_t p = 0; p < parts_of.size(); ++p) {
@@ -379,6 +267,254 @@ FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& opt
   }
   result.cluster_count = next_id;
   return result;
+}
+
+// partitionFaces by regions. Each region (in parallel for METIS) splits into its connected
+// parts; a part of at least min_faces faces is partitioned on its own, a smaller one (a
+// fragment) is attached afterwards, whole, to the neighbouring cluster it shares the most
+// edges with. Clusters are numbered at the end in order of their first face.
+FacePartition regionalPartition(const FaceGraph& graph, const PartitionOptions& options,
+                                std::span<const std::int32_t> region_of_face) {
+  const std::size_t face_count = graph.faceCount();
+  // Regions as dense ids 0..R-1 (in order of their values), and their faces (in face order).
+  std::vector<std::int32_t> values(region_of_face.begin(), region_of_face.end());
+  std::int32_t highest = *std::max_element(values.begin(), values.end());
+  std::vector<std::int32_t> dense;  // value -> dense id, when values are small
+  if (static_cast<std::size_t>(highest) <= 4 * face_count + 64) {
+    dense.assign(static_cast<std::size_t>(highest) + 1, -1);
+    for (const std::int32_t v : values) dense[static_cast<std::size_t>(v)] = 0;
+    std::int32_t next = 0;
+    for (std::int32_t& d : dense) {
+      if (d == 0) d = next++;
+    }
+    for (std::int32_t& v : values) v = dense[static_cast<std::size_t>(v)];
+  } else {
+    std::vector<std::int32_t> sorted(values);
+    std::sort(sorted.begin(), sorted.end());
+    sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
+    for (std::int32_t& v : values) v = static_cast<std::int32_t>(std::lower_bound(sorted.begin(), sorted.end(), v) - sorted.begin());
+  }
+  highest = *std::max_element(values.begin(), values.end());
+  const auto regions = static_cast<std::size_t>(highest) + 1;
+  std::vector<std::int32_t> region_first(regions + 1, 0), region_faces;
+  for (const std::int32_t r : values) ++region_first[static_cast<std::size_t>(r) + 1];
+  for (std::size_t r = 0; r < regions; ++r) region_first[r + 1] += region_first[r];
+  detail::resizeOnHugePages(region_faces, face_count);
+  {
+    std::vector<std::int32_t> fill(region_first.begin(), region_first.end() - 1);
+    for (std::size_t t = 0; t < face_count; ++t) {
+      region_faces[static_cast<std::size_t>(fill[static_cast<std::size_t>(values[t])]++)] = static_cast<std::int32_t>(t);
+    }
+  }
+  const double faces_per_cluster = static_cast<double>(face_count) / static_cast<double>(options.clusters);
+  const auto min_faces = static_cast<std::size_t>(std::ceil(faces_per_cluster / 2));
+
+  // Per face: its piece (a connected part of its region, numbered within the region) while
+  // the region is split, then its part within the piece, or -1 in a fragment.
+  std::vector<std::int32_t> piece_of_face, local_of_face, part_of_face;
+  detail::assignOnHugePages(piece_of_face, face_count, -1);
+  detail::resizeOnHugePages(local_of_face, face_count);
+  detail::resizeOnHugePages(part_of_face, face_count);
+  struct RegionResult {
+    std::vector<std::int32_t> parts;  // per piece: its parts (0: a fragment)
+    std::vector<std::int32_t> fragment_faces, fragment_first{0};  // the fragments' faces
+  };
+  std::vector<RegionResult> results(regions);
+  struct Work {
+    detail::PieceGraph piece;
+    std::vector<std::int32_t> part, stack, piece_first, piece_faces;
+    detail::MultilevelScratch scratch;
+  };
+  std::mt19937 random(options.seed);  // the random partitioner: one generator, regions in order
+  const auto splitRegion = [&](std::size_t r, Work& work) {
+    const std::span<const std::int32_t> faces(region_faces.data() + region_first[r],
+                                              static_cast<std::size_t>(region_first[r + 1] - region_first[r]));
+    const std::int32_t region = static_cast<std::int32_t>(r);
+    // Connected pieces of the region, numbered in order of their lowest face.
+    std::int32_t pieces = 0;
+    for (const std::int32_t start : faces) {
+      if (piece_of_face[static_cast<std::size_t>(start)] >= 0) continue;
+      piece_of_face[static_cast<std::size_t>(start)] = pieces;
+      work.stack.assign(1, start);
+      while (!work.stack.empty()) {
+        const auto t = static_cast<std::size_t>(work.stack.back());
+        work.stack.pop_back();
+        for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
+          const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
+          if (values[other] == region && piece_of_face[other] < 0) {
+            piece_of_face[other] = pieces;
+            work.stack.push_back(static_cast<std::int32_t>(other));
+          }
+        }
+      }
+      ++pieces;
+    }
+    // The faces of each piece, in face order, and their local ids.
+    work.piece_first.assign(static_cast<std::size_t>(pieces) + 1, 0);
+    for (const std::int32_t t : faces) ++work.piece_first[static_cast<std::size_t>(piece_of_face[static_cast<std::size_t>(t)]) + 1];
+    for (std::size_t p = 0; p < static_cast<std::size_t>(pieces); ++p) work.piece_first[p + 1] += work.piece_first[p];
+    work.piece_faces.resize(faces.size());
+    {
+      std::vector<std::int32_t>& fill = work.stack;
+      fill.assign(work.piece_first.begin(), work.piece_first.end() - 1);
+      for (const std::int32_t t : faces) {
+        const auto p = static_cast<std::size_t>(piece_of_face[static_cast<std::size_t>(t)]);
+        local_of_face[static_cast<std::size_t>(t)] = fill[p] - work.piece_first[p];
+        work.piece_faces[static_cast<std::size_t>(fill[p]++)] = t;
+      }
+    }
+    RegionResult& out = results[r];
+    out.parts.assign(static_cast<std::size_t>(pieces), 0);
+    for (std::size_t p = 0; p < static_cast<std::size_t>(pieces); ++p) {
+      const std::span<const std::int32_t> piece_faces(work.piece_faces.data() + work.piece_first[p],
+                                                      static_cast<std::size_t>(work.piece_first[p + 1] - work.piece_first[p]));
+      if (piece_faces.size() < min_faces) {  // a fragment
+        for (const std::int32_t t : piece_faces) part_of_face[static_cast<std::size_t>(t)] = -1;
+        out.fragment_faces.insert(out.fragment_faces.end(), piece_faces.begin(), piece_faces.end());
+        out.fragment_first.push_back(static_cast<std::int32_t>(out.fragment_faces.size()));
+        continue;
+      }
+      const double share = static_cast<double>(options.clusters) * static_cast<double>(piece_faces.size()) /
+                           static_cast<double>(face_count);
+      const auto parts = static_cast<std::int32_t>(std::clamp<double>(std::round(share), 1.0, static_cast<double>(piece_faces.size())));
+      out.parts[p] = parts;
+      if (parts == 1) {
+        for (const std::int32_t t : piece_faces) part_of_face[static_cast<std::size_t>(t)] = 0;
+        continue;
+      }
+      pieceGraph(graph, piece_faces, piece_of_face, values, local_of_face, work.piece);
+      if (options.method == Partitioner::Random) {
+        randomParts(work.piece, parts, random, work.part);
+      } else {
+        detail::multilevelParts(work.piece, parts, options.seed, work.part, work.scratch);
+      }
+      for (std::size_t i = 0; i < piece_faces.size(); ++i) part_of_face[static_cast<std::size_t>(piece_faces[i])] = work.part[i];
+    }
+  };
+  if (options.method == Partitioner::Metis && regions > 1 && detail::metisRandomIsPerThread()) {
+    // Largest regions first, so the last tasks are short.
+    std::vector<std::int32_t> order(regions);
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) {
+      return region_first[static_cast<std::size_t>(a) + 1] - region_first[static_cast<std::size_t>(a)] >
+             region_first[static_cast<std::size_t>(b) + 1] - region_first[static_cast<std::size_t>(b)];
+    });
+    tbb::enumerable_thread_specific<Work> work;
+    tbb::parallel_for(std::size_t{0}, regions, [&](std::size_t i) { splitRegion(static_cast<std::size_t>(order[i]), work.local()); },
+                      tbb::simple_partitioner());
+  } else {
+    Work work;
+    for (std::size_t r = 0; r < regions; ++r) splitRegion(r, work);
+  }
+
+  // Provisional cluster ids: each piece's parts numbered after the pieces before it (regions
+  // in order, pieces in order).
+  std::vector<std::int64_t> base(regions + 1, 0);
+  for (std::size_t r = 0; r < regions; ++r) {
+    base[r + 1] = base[r] + std::accumulate(results[r].parts.begin(), results[r].parts.end(), std::int64_t{0});
+  }
+  std::vector<std::vector<std::int64_t>> piece_base(regions);
+  for (std::size_t r = 0; r < regions; ++r) {
+    std::int64_t at = base[r];
+    for (const std::int32_t parts : results[r].parts) {
+      piece_base[r].push_back(at);
+      at += parts;
+    }
+  }
+  std::int64_t provisional = base[regions];
+  TERRATILES_ASSERT(provisional + static_cast<std::int64_t>(face_count) < INT32_MAX);
+  constexpr std::size_t kBlock = 16384;
+  tbb::parallel_for(std::size_t{0}, (face_count + kBlock - 1) / kBlock, [&](std::size_t b) {
+    for (std::size_t t = b * kBlock; t < std::min(face_count, (b + 1) * kBlock); ++t) {
+      if (part_of_face[t] < 0) continue;
+      const auto r = static_cast<std::size_t>(values[t]);
+      part_of_face[t] = static_cast<std::int32_t>(piece_base[r][static_cast<std::size_t>(piece_of_face[t])] + part_of_face[t]);
+    }
+  });
+  // Fragments, regions in order: each goes whole to the neighbouring cluster it shares the most
+  // edges with (lowest id on ties); one that touches only unplaced fragments waits for the next
+  // round; one with no neighbour at all (a small component) is a cluster of its own.
+  std::vector<std::int32_t> shared_count, touched;
+  for (bool left = true; left;) {
+    left = false;
+    bool placed = false;
+    for (std::size_t r = 0; r < regions; ++r) {
+      RegionResult& result = results[r];
+      for (std::size_t f = 0; f + 1 < result.fragment_first.size(); ++f) {
+        const auto begin = static_cast<std::size_t>(result.fragment_first[f]);
+        const auto end = static_cast<std::size_t>(result.fragment_first[f + 1]);
+        if (begin == end || part_of_face[static_cast<std::size_t>(result.fragment_faces[begin])] >= 0) continue;
+        std::int32_t best = -1, best_count = 0;
+        bool has_neighbour = false;
+        touched.clear();
+        for (std::size_t i = begin; i < end; ++i) {
+          const auto t = static_cast<std::size_t>(result.fragment_faces[i]);
+          for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
+            const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
+            if (values[other] == static_cast<std::int32_t>(r) && piece_of_face[other] == piece_of_face[t]) continue;
+            has_neighbour = true;
+            const std::int32_t cluster = part_of_face[other];
+            if (cluster < 0) continue;
+            touched.push_back(cluster);
+          }
+        }
+        std::sort(touched.begin(), touched.end());
+        for (std::size_t i = 0; i < touched.size();) {
+          std::size_t j = i;
+          while (j < touched.size() && touched[j] == touched[i]) ++j;
+          if (best < 0 || static_cast<std::int32_t>(j - i) > best_count) {
+            best = touched[i];
+            best_count = static_cast<std::int32_t>(j - i);
+          }
+          i = j;
+        }
+        if (best < 0 && has_neighbour) {
+          left = true;
+          continue;
+        }
+        if (best < 0) best = static_cast<std::int32_t>(provisional++);
+        for (std::size_t i = begin; i < end; ++i) part_of_face[static_cast<std::size_t>(result.fragment_faces[i])] = best;
+        placed = true;
+      }
+    }
+    TERRATILES_ASSERT(!left || placed);  // a connected mesh always has a fragment next to a cluster
+  }
+  // Dense ids in order of first face.
+  FacePartition result;
+  std::vector<std::int32_t> id_of(static_cast<std::size_t>(provisional), -1);
+  std::int32_t next_id = 0;
+  result.cluster_of_face.swap(part_of_face);
+  for (std::int32_t& cluster : result.cluster_of_face) {
+    std::int32_t& id = id_of[static_cast<std::size_t>(cluster)];
+    if (id < 0) id = next_id++;
+    cluster = id;
+  }
+  result.cluster_count = next_id;
+  return result;
+}
+
+}  // namespace
+
+FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& options,
+                             std::span<const std::int32_t> region_of_face) {
+  if (options.clusters < 1) {
+    throw Error(ErrorCode::Usage, "the number of clusters is " + std::to_string(options.clusters) +
+                                      "; expected at least 1");
+  }
+  const std::size_t face_count = graph.faceCount();
+  if (!region_of_face.empty()) {
+    if (region_of_face.size() != face_count) {
+      throw Error(ErrorCode::Usage, "partition regions are given for " + std::to_string(region_of_face.size()) +
+                                        " faces; expected one per face (" + std::to_string(face_count) + ")");
+    }
+    const auto lowest = std::min_element(region_of_face.begin(), region_of_face.end());
+    if (*lowest < 0) {
+      throw Error(ErrorCode::Usage, "partition region of face " + std::to_string(lowest - region_of_face.begin()) +
+                                        " is " + std::to_string(*lowest) + "; expected a region id >= 0");
+    }
+  }
+  if (face_count == 0) return {};
+  return region_of_face.empty() ? globalPartition(graph, options) : regionalPartition(graph, options, region_of_face);
 }
 
 std::size_t edgeCut(const FaceGraph& graph, const std::vector<std::int32_t>& cluster_of_face) {

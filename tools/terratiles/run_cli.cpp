@@ -337,6 +337,7 @@ struct LevelsCommandOptions {
   std::string output;
   double tin_max_error_m = 0.5;
   std::string partitioner = "metis";
+  std::string partition_scope = "regional";
   std::string simplifier = "cgal";
   double level_error_growth = 2;  // 0: no budget
   std::size_t random_constraints = 0;
@@ -366,6 +367,9 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
   TinMesh tin = std::move(finest.mesh);
   options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
+  // regional: square cells of the grid of about 64 clusters each (build's tile neighbourhoods
+  // hold 2 x 2 tiles of 16).
+  options.levels.region_clusters = options.partition_scope == "regional" ? 64 : 0;
   options.levels.simplifier = parseSimplifier(options.simplifier);
   if (options.level_error_growth > 0) {
     options.levels.level_error_growth = options.level_error_growth;
@@ -386,6 +390,7 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   summary["crs"] = dem.crs_name;
   summary["tin_max_error_m"] = options.tin_max_error_m;
   summary["partitioner"] = options.partitioner;
+  summary["partition"] = options.partition_scope;
   summary["simplifier"] = options.simplifier;
   summary["cluster_triangles"] = options.levels.cluster_triangles;
   summary["level_ratio"] = options.levels.level_ratio;
@@ -648,6 +653,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->add_option("--partitioner", levels.partitioner,
                    "metis (edge-cut minimisation) or random (random contiguous growth, for comparison)")
       ->check(CLI::IsMember({"metis", "random"}))
+      ->capture_default_str();
+  levels_command
+      ->add_option("--partition", levels.partition_scope,
+                   "How METIS sees a level: regional (square cells of the grid of about 64 clusters each, in "
+                   "parallel; the cell outlines move from level to level) or global (one k-way call over the whole "
+                   "level, seconds for thousands of clusters)")
+      ->check(CLI::IsMember({"regional", "global"}))
       ->capture_default_str();
   levels_command
       ->add_option("--random-constraints", levels.random_constraints,
