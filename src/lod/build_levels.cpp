@@ -43,18 +43,7 @@ void checkOptions(const LevelOptions& options) {
 std::vector<std::int32_t> partitionRegions(const LevelOptions& options, const TinMesh& mesh, std::size_t level,
                                            std::int32_t clusters) {
   if (options.partition_regions) return options.partition_regions(mesh, level);
-  if (options.region_clusters <= 0 || clusters <= options.region_clusters || mesh.vertices.empty()) return {};
-  double min_col = 1e300, min_row = 1e300, max_col = -1e300, max_row = -1e300;
-  for (const GridPoint& v : mesh.vertices) {
-    min_col = std::min(min_col, v.col);
-    max_col = std::max(max_col, v.col);
-    min_row = std::min(min_row, v.row);
-    max_row = std::max(max_row, v.row);
-  }
-  const double area_px = std::max(1.0, (max_col - min_col) * (max_row - min_row));
-  const double cell_px = std::sqrt(area_px * options.region_clusters / clusters);
-  const double offset_px = level % 2 == 1 ? cell_px / 2 : 0;
-  return gridCellRegions(mesh, cell_px, {min_col - offset_px, min_row - offset_px});
+  return clusterCellRegions(mesh, clusters, options.region_clusters, level % 2 == 1);
 }
 
 }  // namespace

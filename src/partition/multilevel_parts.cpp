@@ -261,46 +261,60 @@ void joinOrphans(const PieceGraph& piece, std::int32_t parts, std::vector<std::i
 // Smoothing of connected parts of the faces: a face with exactly one neighbour in its own
 // part and two or more in another part moves there: the cut loses an edge or more, its own
 // part stays connected (the face is a leaf of it) and keeps a face, and the other part stays
-// connected; unless that part would outweigh max_part_faces. Sweeps in face order until
-// nothing moves (every move lowers the cut, so this ends).
+// connected; unless that part would outweigh max_part_faces. One sweep in face order, then
+// the neighbours of the faces that moved, in the order they were queued, until nothing moves
+// (every move lowers the cut, so this ends).
 void smoothParts(const PieceGraph& piece, std::int32_t parts, std::int64_t max_part_faces, std::vector<std::int32_t>& part,
                  MultilevelScratch& scratch) {
   const std::size_t n = piece.size();
   std::vector<std::int64_t>& size = scratch.weight;
   size.assign(static_cast<std::size_t>(parts), 0);
   for (std::size_t u = 0; u < n; ++u) ++size[static_cast<std::size_t>(part[u])];
-  for (bool moved = true; moved;) {
-    moved = false;
-    for (std::size_t u = 0; u < n; ++u) {
-      const std::int32_t own = part[u];
-      std::int32_t other[3], count[3], kinds = 0, own_count = 0;
-      for (std::int32_t e = piece.xadj[u]; e < piece.xadj[u + 1]; ++e) {
-        const std::int32_t q = part[static_cast<std::size_t>(piece.adjncy[static_cast<std::size_t>(e)])];
-        if (q == own) {
-          ++own_count;
-          continue;
-        }
-        std::int32_t k = 0;
-        while (k < kinds && other[k] != q) ++k;
-        if (k == kinds) {
-          if (kinds == 3) continue;  // a triangle has three sides
-          other[kinds] = q;
-          count[kinds++] = 0;
-        }
-        ++count[k];
+  std::vector<std::int32_t>& queue = scratch.stack;  // faces to look at again
+  std::vector<std::int32_t>& queued = scratch.ids;   // 1 while in the queue
+  queue.clear();
+  queued.assign(n, 0);
+  const auto tryMove = [&](std::size_t u) {
+    const std::int32_t own = part[u];
+    std::int32_t other[3], count[3], kinds = 0, own_count = 0;
+    for (std::int32_t e = piece.xadj[u]; e < piece.xadj[u + 1]; ++e) {
+      const std::int32_t q = part[static_cast<std::size_t>(piece.adjncy[static_cast<std::size_t>(e)])];
+      if (q == own) {
+        ++own_count;
+        continue;
       }
-      if (own_count != 1) continue;  // 0: the part's only face; 2 or more: nothing to gain
-      for (std::int32_t k = 0; k < kinds; ++k) {
-        const auto q = static_cast<std::size_t>(other[k]);
-        if (count[k] >= 2 && size[q] < max_part_faces) {
-          --size[static_cast<std::size_t>(own)];
-          ++size[q];
-          part[u] = other[k];
-          moved = true;
-          break;
+      std::int32_t k = 0;
+      while (k < kinds && other[k] != q) ++k;
+      if (k == kinds) {
+        if (kinds == 3) continue;  // a triangle has three sides
+        other[kinds] = q;
+        count[kinds++] = 0;
+      }
+      ++count[k];
+    }
+    if (own_count != 1) return;  // 0: the part's only face; 2 or more: nothing to gain
+    for (std::int32_t k = 0; k < kinds; ++k) {
+      const auto q = static_cast<std::size_t>(other[k]);
+      if (count[k] >= 2 && size[q] < max_part_faces) {
+        --size[static_cast<std::size_t>(own)];
+        ++size[q];
+        part[u] = other[k];
+        for (std::int32_t e = piece.xadj[u]; e < piece.xadj[u + 1]; ++e) {
+          const auto v = static_cast<std::size_t>(piece.adjncy[static_cast<std::size_t>(e)]);
+          if (!queued[v]) {
+            queued[v] = 1;
+            queue.push_back(static_cast<std::int32_t>(v));
+          }
         }
+        return;
       }
     }
+  };
+  for (std::size_t u = 0; u < n; ++u) tryMove(u);
+  for (std::size_t i = 0; i < queue.size(); ++i) {
+    const auto u = static_cast<std::size_t>(queue[i]);
+    queued[u] = 0;
+    tryMove(u);
   }
 }
 

@@ -269,126 +269,163 @@ FacePartition globalPartition(const FaceGraph& graph, const PartitionOptions& op
   return result;
 }
 
-// partitionFaces by regions. Each region (in parallel for METIS) splits into its connected
-// parts; a part of at least min_faces faces is partitioned on its own, a smaller one (a
-// fragment) is attached afterwards, whole, to the neighbouring cluster it shares the most
-// edges with. Clusters are numbered at the end in order of their first face.
+// partitionFaces by regions. Each region (in parallel for METIS) becomes a graph of its own
+// and splits into its connected parts; a part of at least min_faces faces is partitioned on
+// its own, a smaller one (a fragment) is attached afterwards, whole, to the neighbouring
+// cluster it shares the most edges with. Clusters are numbered at the end in order of their
+// first face.
 FacePartition regionalPartition(const FaceGraph& graph, const PartitionOptions& options,
                                 std::span<const std::int32_t> region_of_face) {
   const std::size_t face_count = graph.faceCount();
-  // Regions as dense ids 0..R-1 (in order of their values), and their faces (in face order).
-  std::vector<std::int32_t> values(region_of_face.begin(), region_of_face.end());
-  std::int32_t highest = *std::max_element(values.begin(), values.end());
-  std::vector<std::int32_t> dense;  // value -> dense id, when values are small
-  if (static_cast<std::size_t>(highest) <= 4 * face_count + 64) {
-    dense.assign(static_cast<std::size_t>(highest) + 1, -1);
-    for (const std::int32_t v : values) dense[static_cast<std::size_t>(v)] = 0;
-    std::int32_t next = 0;
-    for (std::int32_t& d : dense) {
-      if (d == 0) d = next++;
-    }
-    for (std::int32_t& v : values) v = dense[static_cast<std::size_t>(v)];
-  } else {
-    std::vector<std::int32_t> sorted(values);
+  // Region ids as given when they are small enough to count (empty regions cost nothing),
+  // otherwise ranked.
+  std::span<const std::int32_t> region = region_of_face;
+  std::vector<std::int32_t> ranked;
+  std::int32_t highest = *std::max_element(region.begin(), region.end());
+  if (static_cast<std::size_t>(highest) > 4 * face_count + 64) {
+    std::vector<std::int32_t> sorted(region.begin(), region.end());
     std::sort(sorted.begin(), sorted.end());
     sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
-    for (std::int32_t& v : values) v = static_cast<std::int32_t>(std::lower_bound(sorted.begin(), sorted.end(), v) - sorted.begin());
+    ranked.resize(face_count);
+    for (std::size_t t = 0; t < face_count; ++t) {
+      ranked[t] = static_cast<std::int32_t>(std::lower_bound(sorted.begin(), sorted.end(), region[t]) - sorted.begin());
+    }
+    region = ranked;
+    highest = static_cast<std::int32_t>(sorted.size()) - 1;
   }
-  highest = *std::max_element(values.begin(), values.end());
   const auto regions = static_cast<std::size_t>(highest) + 1;
-  std::vector<std::int32_t> region_first(regions + 1, 0), region_faces;
-  for (const std::int32_t r : values) ++region_first[static_cast<std::size_t>(r) + 1];
+  // The faces of every region in face order, and each face's position in its region.
+  std::vector<std::int32_t> region_first(regions + 1, 0), region_faces, local_of_face;
+  for (const std::int32_t r : region) ++region_first[static_cast<std::size_t>(r) + 1];
   for (std::size_t r = 0; r < regions; ++r) region_first[r + 1] += region_first[r];
   detail::resizeOnHugePages(region_faces, face_count);
+  detail::resizeOnHugePages(local_of_face, face_count);
   {
     std::vector<std::int32_t> fill(region_first.begin(), region_first.end() - 1);
     for (std::size_t t = 0; t < face_count; ++t) {
-      region_faces[static_cast<std::size_t>(fill[static_cast<std::size_t>(values[t])]++)] = static_cast<std::int32_t>(t);
+      const auto r = static_cast<std::size_t>(region[t]);
+      local_of_face[t] = fill[r] - region_first[r];
+      region_faces[static_cast<std::size_t>(fill[r]++)] = static_cast<std::int32_t>(t);
     }
   }
   const double faces_per_cluster = static_cast<double>(face_count) / static_cast<double>(options.clusters);
   const auto min_faces = static_cast<std::size_t>(std::ceil(faces_per_cluster / 2));
 
-  // Per face: its piece (a connected part of its region, numbered within the region) while
-  // the region is split, then its part within the piece, or -1 in a fragment.
-  std::vector<std::int32_t> piece_of_face, local_of_face, part_of_face;
-  detail::assignOnHugePages(piece_of_face, face_count, -1);
-  detail::resizeOnHugePages(local_of_face, face_count);
+  // Per face: its cluster within its piece (made global below), or -1 in a fragment; the
+  // fragment's number in fragment_of_face (written for fragment faces only).
+  std::vector<std::int32_t> part_of_face, fragment_of_face;
   detail::resizeOnHugePages(part_of_face, face_count);
+  detail::resizeOnHugePages(fragment_of_face, face_count);
   struct RegionResult {
-    std::vector<std::int32_t> parts;  // per piece: its parts (0: a fragment)
+    std::vector<std::int32_t> parts;  // per piece of at least min_faces faces: its parts
     std::vector<std::int32_t> fragment_faces, fragment_first{0};  // the fragments' faces
   };
   std::vector<RegionResult> results(regions);
   struct Work {
-    detail::PieceGraph piece;
-    std::vector<std::int32_t> part, stack, piece_first, piece_faces;
+    detail::PieceGraph graph, piece;  // the region's graph; a piece of it when it has several
+    std::vector<std::int32_t> component, piece_of_local, stack, part;
     detail::MultilevelScratch scratch;
   };
   std::mt19937 random(options.seed);  // the random partitioner: one generator, regions in order
   const auto splitRegion = [&](std::size_t r, Work& work) {
     const std::span<const std::int32_t> faces(region_faces.data() + region_first[r],
                                               static_cast<std::size_t>(region_first[r + 1] - region_first[r]));
-    const std::int32_t region = static_cast<std::int32_t>(r);
-    // Connected pieces of the region, numbered in order of their lowest face.
+    if (faces.empty()) return;
+    const auto region_id = static_cast<std::int32_t>(r);
+    // The region as a graph of its own (local ids: positions in `faces`).
+    detail::PieceGraph& local = work.graph;
+    local.xadj.resize(faces.size() + 1);
+    local.xadj[0] = 0;
+    local.adjncy.clear();
+    local.adjncy.reserve(3 * faces.size());
+    for (std::size_t i = 0; i < faces.size(); ++i) {
+      const auto t = static_cast<std::size_t>(faces[i]);
+      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
+        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
+        if (region[other] == region_id) local.adjncy.push_back(local_of_face[other]);
+      }
+      local.xadj[i + 1] = static_cast<std::int32_t>(local.adjncy.size());
+    }
+    // Its connected pieces, numbered in order of their lowest face.
+    std::vector<std::int32_t>& component = work.component;
+    component.assign(faces.size(), -1);
     std::int32_t pieces = 0;
-    for (const std::int32_t start : faces) {
-      if (piece_of_face[static_cast<std::size_t>(start)] >= 0) continue;
-      piece_of_face[static_cast<std::size_t>(start)] = pieces;
-      work.stack.assign(1, start);
+    for (std::size_t start = 0; start < faces.size(); ++start) {
+      if (component[start] >= 0) continue;
+      component[start] = pieces;
+      work.stack.assign(1, static_cast<std::int32_t>(start));
       while (!work.stack.empty()) {
-        const auto t = static_cast<std::size_t>(work.stack.back());
+        const auto u = static_cast<std::size_t>(work.stack.back());
         work.stack.pop_back();
-        for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
-          const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-          if (values[other] == region && piece_of_face[other] < 0) {
-            piece_of_face[other] = pieces;
-            work.stack.push_back(static_cast<std::int32_t>(other));
+        for (std::int32_t e = local.xadj[u]; e < local.xadj[u + 1]; ++e) {
+          const auto v = static_cast<std::size_t>(local.adjncy[static_cast<std::size_t>(e)]);
+          if (component[v] < 0) {
+            component[v] = pieces;
+            work.stack.push_back(static_cast<std::int32_t>(v));
           }
         }
       }
       ++pieces;
     }
-    // The faces of each piece, in face order, and their local ids.
-    work.piece_first.assign(static_cast<std::size_t>(pieces) + 1, 0);
-    for (const std::int32_t t : faces) ++work.piece_first[static_cast<std::size_t>(piece_of_face[static_cast<std::size_t>(t)]) + 1];
-    for (std::size_t p = 0; p < static_cast<std::size_t>(pieces); ++p) work.piece_first[p + 1] += work.piece_first[p];
-    work.piece_faces.resize(faces.size());
-    {
-      std::vector<std::int32_t>& fill = work.stack;
-      fill.assign(work.piece_first.begin(), work.piece_first.end() - 1);
-      for (const std::int32_t t : faces) {
-        const auto p = static_cast<std::size_t>(piece_of_face[static_cast<std::size_t>(t)]);
-        local_of_face[static_cast<std::size_t>(t)] = fill[p] - work.piece_first[p];
-        work.piece_faces[static_cast<std::size_t>(fill[p]++)] = t;
-      }
-    }
+    std::vector<std::int32_t> piece_size(static_cast<std::size_t>(pieces), 0);
+    for (const std::int32_t c : component) ++piece_size[static_cast<std::size_t>(c)];
     RegionResult& out = results[r];
-    out.parts.assign(static_cast<std::size_t>(pieces), 0);
-    for (std::size_t p = 0; p < static_cast<std::size_t>(pieces); ++p) {
-      const std::span<const std::int32_t> piece_faces(work.piece_faces.data() + work.piece_first[p],
-                                                      static_cast<std::size_t>(work.piece_first[p + 1] - work.piece_first[p]));
-      if (piece_faces.size() < min_faces) {  // a fragment
-        for (const std::int32_t t : piece_faces) part_of_face[static_cast<std::size_t>(t)] = -1;
-        out.fragment_faces.insert(out.fragment_faces.end(), piece_faces.begin(), piece_faces.end());
+    out.parts.clear();
+    for (std::int32_t p = 0; p < pieces; ++p) {
+      const auto size = static_cast<std::size_t>(piece_size[static_cast<std::size_t>(p)]);
+      const bool fragment = size < min_faces;
+      // The piece's graph: the region's own when it is the only piece, else its faces'
+      // edges renumbered.
+      const detail::PieceGraph* piece = &local;
+      std::vector<std::int32_t>& members = work.piece_of_local;  // piece -> region local ids
+      if (pieces > 1) {
+        members.clear();
+        for (std::size_t u = 0; u < faces.size(); ++u) {
+          if (component[u] == p) members.push_back(static_cast<std::int32_t>(u));
+        }
+      }
+      if (fragment) {
+        const auto id = static_cast<std::int32_t>(out.fragment_first.size() - 1);
+        for (std::size_t i = 0; i < size; ++i) {
+          const auto t = static_cast<std::size_t>(faces[static_cast<std::size_t>(pieces > 1 ? members[i] : static_cast<std::int32_t>(i))]);
+          part_of_face[t] = -1;
+          fragment_of_face[t] = id;
+          out.fragment_faces.push_back(static_cast<std::int32_t>(t));
+        }
         out.fragment_first.push_back(static_cast<std::int32_t>(out.fragment_faces.size()));
         continue;
       }
-      const double share = static_cast<double>(options.clusters) * static_cast<double>(piece_faces.size()) /
-                           static_cast<double>(face_count);
-      const auto parts = static_cast<std::int32_t>(std::clamp<double>(std::round(share), 1.0, static_cast<double>(piece_faces.size())));
-      out.parts[p] = parts;
+      const double share = static_cast<double>(options.clusters) * static_cast<double>(size) / static_cast<double>(face_count);
+      const auto parts = static_cast<std::int32_t>(std::clamp<double>(std::round(share), 1.0, static_cast<double>(size)));
+      out.parts.push_back(parts);
+      if (pieces > 1 && parts > 1) {
+        // Renumber the piece's edges (work.stack: region local id -> piece id).
+        std::vector<std::int32_t>& piece_id = work.stack;
+        piece_id.assign(faces.size(), -1);
+        for (std::size_t i = 0; i < members.size(); ++i) piece_id[static_cast<std::size_t>(members[i])] = static_cast<std::int32_t>(i);
+        work.piece.xadj.assign(1, 0);
+        work.piece.adjncy.clear();
+        for (const std::int32_t u : members) {
+          for (std::int32_t e = local.xadj[static_cast<std::size_t>(u)]; e < local.xadj[static_cast<std::size_t>(u) + 1]; ++e) {
+            work.piece.adjncy.push_back(piece_id[static_cast<std::size_t>(local.adjncy[static_cast<std::size_t>(e)])]);
+          }
+          work.piece.xadj.push_back(static_cast<std::int32_t>(work.piece.adjncy.size()));
+        }
+        piece = &work.piece;
+      }
       if (parts == 1) {
-        for (const std::int32_t t : piece_faces) part_of_face[static_cast<std::size_t>(t)] = 0;
-        continue;
-      }
-      pieceGraph(graph, piece_faces, piece_of_face, values, local_of_face, work.piece);
-      if (options.method == Partitioner::Random) {
-        randomParts(work.piece, parts, random, work.part);
+        work.part.assign(size, 0);
+      } else if (options.method == Partitioner::Random) {
+        randomParts(*piece, parts, random, work.part);
       } else {
-        detail::multilevelParts(work.piece, parts, options.seed, work.part, work.scratch);
+        detail::multilevelParts(*piece, parts, options.seed, work.part, work.scratch);
       }
-      for (std::size_t i = 0; i < piece_faces.size(); ++i) part_of_face[static_cast<std::size_t>(piece_faces[i])] = work.part[i];
+      // Parts are numbered within the region for now: this piece's after the pieces before.
+      const std::int32_t before = std::accumulate(out.parts.begin(), out.parts.end() - 1, 0);
+      for (std::size_t i = 0; i < size; ++i) {
+        const std::size_t u = pieces > 1 ? static_cast<std::size_t>(members[i]) : i;
+        part_of_face[static_cast<std::size_t>(faces[u])] = before + work.part[i];
+      }
     }
   };
   if (options.method == Partitioner::Metis && regions > 1 && detail::metisRandomIsPerThread()) {
@@ -407,57 +444,48 @@ FacePartition regionalPartition(const FaceGraph& graph, const PartitionOptions& 
     for (std::size_t r = 0; r < regions; ++r) splitRegion(r, work);
   }
 
-  // Provisional cluster ids: each piece's parts numbered after the pieces before it (regions
-  // in order, pieces in order).
+  // Provisional cluster ids: each region's parts numbered after the regions before it.
   std::vector<std::int64_t> base(regions + 1, 0);
   for (std::size_t r = 0; r < regions; ++r) {
     base[r + 1] = base[r] + std::accumulate(results[r].parts.begin(), results[r].parts.end(), std::int64_t{0});
-  }
-  std::vector<std::vector<std::int64_t>> piece_base(regions);
-  for (std::size_t r = 0; r < regions; ++r) {
-    std::int64_t at = base[r];
-    for (const std::int32_t parts : results[r].parts) {
-      piece_base[r].push_back(at);
-      at += parts;
-    }
   }
   std::int64_t provisional = base[regions];
   TERRATILES_ASSERT(provisional + static_cast<std::int64_t>(face_count) < INT32_MAX);
   constexpr std::size_t kBlock = 16384;
   tbb::parallel_for(std::size_t{0}, (face_count + kBlock - 1) / kBlock, [&](std::size_t b) {
     for (std::size_t t = b * kBlock; t < std::min(face_count, (b + 1) * kBlock); ++t) {
-      if (part_of_face[t] < 0) continue;
-      const auto r = static_cast<std::size_t>(values[t]);
-      part_of_face[t] = static_cast<std::int32_t>(piece_base[r][static_cast<std::size_t>(piece_of_face[t])] + part_of_face[t]);
+      if (part_of_face[t] >= 0) part_of_face[t] += static_cast<std::int32_t>(base[static_cast<std::size_t>(region[t])]);
     }
   });
   // Fragments, regions in order: each goes whole to the neighbouring cluster it shares the most
   // edges with (lowest id on ties); one that touches only unplaced fragments waits for the next
   // round; one with no neighbour at all (a small component) is a cluster of its own.
-  std::vector<std::int32_t> shared_count, touched;
+  std::vector<std::int32_t> touched;
   for (bool left = true; left;) {
     left = false;
     bool placed = false;
     for (std::size_t r = 0; r < regions; ++r) {
-      RegionResult& result = results[r];
+      const RegionResult& result = results[r];
       for (std::size_t f = 0; f + 1 < result.fragment_first.size(); ++f) {
         const auto begin = static_cast<std::size_t>(result.fragment_first[f]);
         const auto end = static_cast<std::size_t>(result.fragment_first[f + 1]);
-        if (begin == end || part_of_face[static_cast<std::size_t>(result.fragment_faces[begin])] >= 0) continue;
-        std::int32_t best = -1, best_count = 0;
+        if (part_of_face[static_cast<std::size_t>(result.fragment_faces[begin])] >= 0) continue;  // placed
         bool has_neighbour = false;
         touched.clear();
         for (std::size_t i = begin; i < end; ++i) {
           const auto t = static_cast<std::size_t>(result.fragment_faces[i]);
           for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
             const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-            if (values[other] == static_cast<std::int32_t>(r) && piece_of_face[other] == piece_of_face[t]) continue;
-            has_neighbour = true;
             const std::int32_t cluster = part_of_face[other];
-            if (cluster < 0) continue;
-            touched.push_back(cluster);
+            if (cluster < 0 && region[other] == static_cast<std::int32_t>(r) &&
+                fragment_of_face[other] == static_cast<std::int32_t>(f)) {
+              continue;  // the fragment itself
+            }
+            has_neighbour = true;
+            if (cluster >= 0) touched.push_back(cluster);
           }
         }
+        std::int32_t best = -1, best_count = 0;
         std::sort(touched.begin(), touched.end());
         for (std::size_t i = 0; i < touched.size();) {
           std::size_t j = i;
@@ -555,6 +583,22 @@ std::vector<std::int32_t> gridCellRegions(const TinMesh& mesh, double cell_px, s
     region[t] = static_cast<std::int32_t>(std::lower_bound(cells.begin(), cells.end(), cellOf(t)) - cells.begin());
   }
   return region;
+}
+
+std::vector<std::int32_t> clusterCellRegions(const TinMesh& mesh, std::int32_t clusters, std::int32_t region_clusters,
+                                             bool offset) {
+  if (region_clusters <= 0 || clusters <= region_clusters || mesh.vertices.empty()) return {};
+  double min_col = 1e300, min_row = 1e300, max_col = -1e300, max_row = -1e300;
+  for (const GridPoint& v : mesh.vertices) {
+    min_col = std::min(min_col, v.col);
+    max_col = std::max(max_col, v.col);
+    min_row = std::min(min_row, v.row);
+    max_row = std::max(max_row, v.row);
+  }
+  const double area_px = std::max(1.0, (max_col - min_col) * (max_row - min_row));
+  const double cell_px = std::sqrt(area_px * region_clusters / clusters);
+  const double offset_px = offset ? cell_px / 2 : 0;
+  return gridCellRegions(mesh, cell_px, {min_col - offset_px, min_row - offset_px});
 }
 
 }  // namespace terratiles

@@ -6,13 +6,15 @@
 // that.
 //
 // Global or by regions. One METIS k-way call over millions of faces for thousands of parts
-// costs seconds (Gabon SRTM at --tin-max-error 5: 2.4 M faces into 2400 parts, 9-12 s; its
+// costs seconds (SRTM Gabon at --tin-max-error 5: 2.4 M faces into 4608 parts, 6.5-10 s; k-way's
 // cost grows with the parts as well as the faces). Given a region per face (the tile
 // neighbourhoods of src/tiling/assign_clusters.h, or square cells of the grid:
-// gridCellRegions), every region is partitioned on its own into parts proportional to its
-// faces, the regions in parallel: about the same edge cut (the region outlines become
-// cluster borders; choose regions whose outlines the caller does not need locked, see
-// tileNeighbourhoodRegions) at a fraction of the time.
+// gridCellRegions, clusterCellRegions), every region is partitioned on its own, the regions
+// in parallel, by METIS on a coarsened graph refined back to the faces
+// (src/partition/multilevel_parts.h). Measured on Gabon, level by level: edge cut 3-10 % above
+// one global k-way call (the region outlines are cluster borders too; choose regions whose
+// outlines the caller does not need locked, see tileNeighbourhoodRegions), at a tenth of the
+// time on one thread.
 
 #include <array>
 #include <cstdint>
@@ -38,23 +40,26 @@ struct FacePartition {
 };
 
 // Splits the faces into pieces, partitions every piece on its own into a share of
-// `options.clusters` proportional to its faces (at least one), and numbers the clusters
-// densely: piece by piece in order of each piece's lowest face, and within a piece in order
-// of first appearance. So no cluster spans two pieces.
-//   region_of_face empty: the pieces are the connected components of the mesh (one METIS call
-//     per component, the global partition).
-//   region_of_face given (a value >= 0 per face, any numbering): the pieces are the connected
-//     parts of each region (faces of one region joined through shared edges). A piece with
-//     fewer than half a cluster's faces (faces / clusters) is joined to the neighbouring piece
-//     it shares the most edges with (lowest piece on ties), so thin slivers that a region's
-//     outline cuts off do not become clusters of their own; a component that small stays one.
-// Within a piece METIS is asked for contiguous parts (METIS_OPTION_CONTIG) with the same seed
-// for every piece, and the random growth is contiguous by construction (one generator, pieces
-// in order); a part METIS leaves empty is dropped. METIS runs on the pieces in parallel (TBB)
-// when its random numbers are drawn per thread (metisRandomIsPerThread), else one after the
-// other: the result is the same for any thread count.
-// Throws Error(Usage) for clusters < 1 or a region_of_face of the wrong size or with a negative
-// value, and Error(Internal) if METIS fails.
+// `options.clusters` proportional to its faces (rounded, at least one), so no cluster spans two
+// pieces, and numbers the clusters densely.
+//   region_of_face empty (global): the pieces are the connected components of the mesh. METIS
+//     k-way (METIS_OPTION_CONTIG) runs once per component; ids component by component (in
+//     order of each one's lowest face), within one in order of first appearance. The random
+//     growth is contiguous by construction (one generator, components in order).
+//   region_of_face given (a value >= 0 per face, any numbering; regional): the pieces are the
+//     connected parts of each region (faces of one region joined through shared edges). A
+//     piece with at least half a cluster's faces (faces / clusters) is partitioned by
+//     multilevelParts (METIS recursive bisection of the coarsened piece, refined; contiguous
+//     parts), or grown at random (one generator, regions in order, pieces in order of their
+//     lowest face); a smaller piece (a sliver that a region outline cuts off) is attached
+//     afterwards, whole, to the neighbouring cluster it shares the most edges with (lowest
+//     provisional id on ties), and one with no neighbour (a small component) is a cluster of
+//     its own. Ids in order of each cluster's first face.
+// Every METIS call gets options.seed. A part METIS leaves empty is dropped. The regions are
+// partitioned in parallel (TBB) when METIS draws its random numbers per thread
+// (detail::metisRandomIsPerThread), else one after the other (as the components are): the
+// result is the same for any thread count. Throws Error(Usage) for clusters < 1 or a region_of_face of the wrong size or
+// with a negative value, and Error(Internal) if METIS fails.
 FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& options,
                              std::span<const std::int32_t> region_of_face = {});
 
@@ -65,6 +70,13 @@ std::size_t edgeCut(const FaceGraph& graph, const std::vector<std::int32_t>& clu
 // origin_px, in columns and rows) that holds each face's centroid, as a region id per face.
 // Throws Error(Usage) unless cell_px > 0 and finite.
 std::vector<std::int32_t> gridCellRegions(const TinMesh& mesh, double cell_px, std::array<double, 2> origin_px);
+
+// gridCellRegions with cells sized to hold about region_clusters of the mesh's `clusters`
+// clusters each (by the area of the vertices' bounding box), starting at its corner, or half a
+// cell before it when `offset` (so the cell outlines of two successive levels differ). None
+// (empty: partition globally) when region_clusters <= 0 or clusters <= region_clusters.
+std::vector<std::int32_t> clusterCellRegions(const TinMesh& mesh, std::int32_t clusters, std::int32_t region_clusters,
+                                             bool offset);
 
 namespace detail {
 // True when libmetis draws its random numbers (libc's rand, which METIS 5.1 reseeds with

@@ -131,6 +131,14 @@ std::array<double, 2> TileFrame::tileCoordinates(std::array<double, 2> scheme) c
   return {0, 0};
 }
 
+std::array<double, 4> TileFrame::approximateTileExtent() const {
+  std::array<double, 4> extent{1e300, 1e300, -1e300, -1e300};
+  for (const auto& p : lattice_) {
+    extent = {std::min(extent[0], p[0]), std::min(extent[1], p[1]), std::max(extent[2], p[0]), std::max(extent[3], p[1])};
+  }
+  return extent;
+}
+
 std::array<double, 2> TileFrame::approximateTileCoordinates(double col, double row) const {
   constexpr int n = kLatticeCells + 1;
   const auto cell = [](double at, int size, int& index) {
@@ -306,40 +314,25 @@ std::vector<std::int32_t> tileNeighbourhoodRegions(const TileFrame& frame, const
   const std::size_t face_count = mesh.triangleCount();
   const auto& idx = mesh.triangle_indices;
   const double tiles = std::ldexp(1.0, zoom);
-  // The block of 2 x 2 tiles of `zoom`, offset by one tile, that holds the face's centroid:
-  // (row, column) packed so that they sort as pairs.
-  const auto blockOf = [&](std::size_t f) {
-    const GridPoint &p = mesh.vertices[idx[3 * f]], &q = mesh.vertices[idx[3 * f + 1]], &r = mesh.vertices[idx[3 * f + 2]];
-    const std::array<double, 2> at = frame.approximateTileCoordinates((p.col + q.col + r.col) / 3, (p.row + q.row + r.row) / 3);
-    const auto tile_x = static_cast<std::int64_t>(std::floor(at[0] * tiles));
-    const auto tile_y = static_cast<std::int64_t>(std::floor(at[1] * tiles));
-    // Floor division by 2 of (tile + 1); offsets keep both halves non-negative.
-    const std::int64_t x = ((tile_x + 1) >> 1) + (std::int64_t{1} << 31), y = ((tile_y + 1) >> 1) + (std::int64_t{1} << 31);
-    return static_cast<std::uint64_t>(y) << 32 | static_cast<std::uint64_t>(x);
+  // The blocks over the DEM.
+  const auto blockAt = [&](double x, double y) {
+    const auto tile_x = static_cast<std::int64_t>(std::floor(x * tiles));
+    const auto tile_y = static_cast<std::int64_t>(std::floor(y * tiles));
+    return std::array<std::int64_t, 2>{(tile_x + 1) >> 1, (tile_y + 1) >> 1};
   };
-  constexpr std::size_t kBlock = 16384;
-  const std::size_t blocks = (face_count + kBlock - 1) / kBlock;
-  // Few distinct blocks: each task keeps its own sorted list, then they are merged.
-  std::vector<std::vector<std::uint64_t>> found(blocks);
-  tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
-    std::vector<std::uint64_t>& keys = found[b];
-    std::uint64_t last = 0;
-    for (std::size_t f = b * kBlock; f < std::min(face_count, (b + 1) * kBlock); ++f) {
-      const std::uint64_t key = blockOf(f);
-      if (!keys.empty() && key == last) continue;
-      last = key;
-      const auto at = std::lower_bound(keys.begin(), keys.end(), key);
-      if (at == keys.end() || *at != key) keys.insert(at, key);
-    }
-  });
-  std::vector<std::uint64_t> keys;
-  for (const auto& part : found) keys.insert(keys.end(), part.begin(), part.end());
-  std::sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  const std::array<double, 4> extent = frame.approximateTileExtent();
+  const std::array<std::int64_t, 2> low = blockAt(extent[0], extent[1]), high = blockAt(extent[2], extent[3]);
+  const std::int64_t columns = high[0] - low[0] + 1;
   std::vector<std::int32_t> region(face_count);
-  tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
+  constexpr std::size_t kBlock = 16384;
+  tbb::parallel_for(std::size_t{0}, (face_count + kBlock - 1) / kBlock, [&](std::size_t b) {
     for (std::size_t f = b * kBlock; f < std::min(face_count, (b + 1) * kBlock); ++f) {
-      region[f] = static_cast<std::int32_t>(std::lower_bound(keys.begin(), keys.end(), blockOf(f)) - keys.begin());
+      const GridPoint &p = mesh.vertices[idx[3 * f]], &q = mesh.vertices[idx[3 * f + 1]], &r = mesh.vertices[idx[3 * f + 2]];
+      const std::array<double, 2> at = frame.approximateTileCoordinates((p.col + q.col + r.col) / 3, (p.row + q.row + r.row) / 3);
+      const auto block = blockAt(at[0], at[1]);
+      const std::int64_t x = std::clamp(block[0], low[0], high[0]) - low[0];
+      const std::int64_t y = std::clamp(block[1], low[1], high[1]) - low[1];
+      region[f] = static_cast<std::int32_t>(y * columns + x);
     }
   });
   return region;

@@ -86,6 +86,9 @@ class TileFrame {
   // 65 x 65 grid points over the DEM: O(1), pure, no transformation. For work that any smooth
   // approximation serves (partition regions), never for tile membership.
   std::array<double, 2> approximateTileCoordinates(double col, double row) const;
+  // The smallest and largest approximateTileCoordinates over the DEM: {min x, min y, max x,
+  // max y} (bilinear interpolation stays within its lattice's values).
+  std::array<double, 4> approximateTileExtent() const;
   // The tile holding a point in scheme coordinates (latitude clamped as above; local: the
   // point clamped into the zoom-0 tile).
   TileKey tileAt(std::array<double, 2> point, std::int32_t zoom) const;
@@ -147,8 +150,11 @@ FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, 
 // follows them and they are not locked. Outlines along the zoom - 1 tile borders instead (a
 // region per tile) would make every cluster next to a tile border cross it (the faces the
 // border runs through are split by their centroids), and merge would carry twice the
-// overlap in every coarser tile. Region ids are dense, in order of (row, column) of the
-// blocks. O(T) after one toScheme of the vertices; parallel over faces.
+// overlap in every coarser tile. The centroid's tile comes from
+// TileFrame::approximateTileCoordinates (no transformation per face; a face within a hundredth
+// of a tile of an edge may land on either side, which only moves a region outline by a face).
+// Region ids number the blocks over the DEM row by row (many may hold no face).
+// O(T), parallel over faces.
 std::vector<std::int32_t> tileNeighbourhoodRegions(const TileFrame& frame, const TinMesh& mesh, std::int32_t zoom);
 
 // LevelOptions::partition_regions for levels shown from max_zoom down: level l (zoom
