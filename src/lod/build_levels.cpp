@@ -35,6 +35,15 @@ void checkOptions(const LevelOptions& options) {
     usage("--level-error-growth must be >= 1, found " + std::to_string(options.level_error_growth));
   }
   if (options.coarser_levels < 0) usage("the number of levels must be >= 0");
+  if (options.region_clusters < 0) usage("the clusters per partition region must be >= 0 (0: global), found " + std::to_string(options.region_clusters));
+}
+
+// The level's regions for partitionFaces (LevelOptions::partition_regions, region_clusters),
+// or none: METIS over whole components.
+std::vector<std::int32_t> partitionRegions(const LevelOptions& options, const TinMesh& mesh, std::size_t level,
+                                           std::int32_t clusters) {
+  if (options.partition_regions) return options.partition_regions(mesh, level);
+  return clusterCellRegions(mesh, clusters, options.region_clusters, level % 2 == 1);
 }
 
 }  // namespace
@@ -132,7 +141,8 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     partition_options.clusters = clustersFor(options, l, triangles);
     partition_options.seed = options.seed + static_cast<std::uint32_t>(l);
     if (options.repartition || l == 0) {
-      level.partition = partitionFaces(graph, partition_options);
+      const std::vector<std::int32_t> regions = partitionRegions(options, level.mesh, l, partition_options.clusters);
+      level.partition = partitionFaces(graph, partition_options, regions);
       if (options.regroup_clusters) level.partition = options.regroup_clusters(level.mesh, l, level.partition);
     } else {
       level.partition = std::move(inherited);

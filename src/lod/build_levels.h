@@ -36,6 +36,19 @@ struct LevelOptions {
   std::int32_t cluster_triangles = 2048;
   // When not empty, clusters_per_level[l] clusters split level l (instead of the above).
   std::vector<std::int32_t> clusters_per_level;
+  // How METIS sees a level (partitionFaces, src/partition/partition_faces.h):
+  //  - partition_regions set: by the regions it returns for the level's mesh and index, each
+  //    region on its own, in parallel (the tiling stage: tile neighbourhoods, whose outlines
+  //    its regroup_clusters joins away);
+  //  - else region_clusters > 0 and the level wants more clusters than that: by square cells
+  //    of the grid, each about region_clusters clusters' worth of the mesh's bounding box, on
+  //    every other level offset by half a cell (so the cell outlines, which stay locked as
+  //    cluster borders of that level, move from level to level as the borders of a
+  //    re-partition do);
+  //  - else globally: one METIS k-way call per connected component (the paper's method as
+  //    written; seconds per level for thousands of clusters over millions of faces).
+  std::int32_t region_clusters = 0;
+  std::function<std::vector<std::int32_t>(const TinMesh&, std::size_t)> partition_regions;
   // The edge-collapse engine: CGAL's edge collapse (the default, the quality reference) or
   // native (terratiles' own over flat arrays, faster; simplify_clusters.h).
   Simplifier simplifier = Simplifier::Cgal;

@@ -27,8 +27,14 @@ struct FaceGraph {
 // Builds the graph of `mesh`. Throws Error(Input) naming the edge when the mesh is not an
 // oriented edge-manifold: an edge used by more than two triangles, or by two triangles that
 // run it in the same direction (inconsistent orientation), or a degenerate triangle (a
-// repeated corner). O(T log T).
+// repeated corner). O(T) and parallel (TBB) for a valid mesh: each side finds its twin among
+// the sides leaving its far vertex (per-vertex lists), and every twin is checked to point
+// back; any doubt goes to a sort of all sides (O(T log T)), which names the first fault in
+// edge order. The result is the same either way (a valid mesh's twins are unique).
 FaceGraph buildFaceGraph(const TinMesh& mesh);
+// The same into `graph`, reusing its arrays' memory (a level loop keeps one graph: the next
+// level's arrays are smaller and need no fresh pages).
+void buildFaceGraph(const TinMesh& mesh, FaceGraph& graph);
 
 // The connected components of the graph (through shared edges): a component id per face,
 // numbered 0.. in order of each component's lowest face; returns the number of components.

@@ -501,6 +501,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       // in the same tiles, so only borders that some tile outline follows stay locked.
       level_options.regroup_clusters = joinTileClusters(*frame, plan.max_zoom);
     }
+    if (!options.global_partition) level_options.partition_regions = tileRegions(*frame, plan.max_zoom);
     if (plan.max_zoom > plan.min_zoom) {
       level_options.coarser_levels = plan.max_zoom - plan.min_zoom;
       levels = buildLevels(dem, std::move(finest.mesh), level_options, std::move(finest.constrained_edges), progress);

@@ -42,6 +42,9 @@ struct BuildOptions {
   // clusters, merge: simplify the clusters that cross the same tiles as one, so only borders
   // a tile outline follows stay locked (paper fig 34).
   bool join_tile_clusters = true;
+  // clusters: METIS per tile neighbourhood, in parallel (tileNeighbourhoodRegions); true: one
+  // METIS call per connected component over the whole level (slow; for comparison).
+  bool global_partition = false;
   double level_ratio = 0.5;            // clusters: edges kept per simplification
   Simplifier simplifier = Simplifier::Cgal;  // clusters: the edge-collapse engine
   double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)

@@ -1,5 +1,6 @@
 #include "src/tiling/assign_clusters.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -29,6 +30,17 @@ std::string_view assignmentName(Assignment assignment) {
   return "merge";
 }
 
+struct TileFrame::ThreadTransforms {
+  explicit ThreadTransforms(std::string wkt) : crs_wkt(std::move(wkt)) {}
+  std::string crs_wkt;
+  tbb::enumerable_thread_specific<std::unique_ptr<CrsToWgs84>> transforms;
+  const CrsToWgs84& local() {
+    std::unique_ptr<CrsToWgs84>& transform = transforms.local();
+    if (!transform) transform = std::make_unique<CrsToWgs84>(crs_wkt);
+    return *transform;
+  }
+};
+
 TileFrame::TileFrame(TileSchemeKind kind, const DemGrid& dem) : kind_(kind), dem_(dem) {
   if (kind == TileSchemeKind::Local) {
     const TileBounds extent{dem.origin_x, dem.origin_y - dem.height * dem.pixel_size_y,
@@ -36,7 +48,35 @@ TileFrame::TileFrame(TileSchemeKind kind, const DemGrid& dem) : kind_(kind), dem
     local_ = makeLocalTileScheme(extent);
   } else {
     to_wgs84_ = std::make_unique<CrsToWgs84>(dem.crs_wkt);
+    thread_transforms_ = std::make_unique<ThreadTransforms>(dem.crs_wkt);
   }
+  // The lattice of approximateTileCoordinates over the pixel centres.
+  constexpr int n = kLatticeCells + 1;
+  std::vector<GridPoint> points(static_cast<std::size_t>(n) * n);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      points[static_cast<std::size_t>(j * n + i)] = {std::max(0, dem.width - 1) * static_cast<double>(i) / kLatticeCells,
+                                                     std::max(0, dem.height - 1) * static_cast<double>(j) / kLatticeCells, 0};
+    }
+  }
+  std::vector<std::array<double, 2>> scheme = toScheme(points);
+  if (kind != TileSchemeKind::Local) {
+    // Unwrap longitudes along the lattice, so interpolation never runs across the antimeridian.
+    const auto unwrap = [](double lon_deg, double near_deg) {
+      while (lon_deg - near_deg > 180) lon_deg -= 360;
+      while (lon_deg - near_deg < -180) lon_deg += 360;
+      return lon_deg;
+    };
+    for (int j = 0; j < n; ++j) {
+      for (int i = 0; i < n; ++i) {
+        auto& lon = scheme[static_cast<std::size_t>(j * n + i)][0];
+        if (i > 0) lon = unwrap(lon, scheme[static_cast<std::size_t>(j * n + i - 1)][0]);
+        else if (j > 0) lon = unwrap(lon, scheme[static_cast<std::size_t>((j - 1) * n)][0]);
+      }
+    }
+  }
+  lattice_.resize(scheme.size());
+  for (std::size_t k = 0; k < scheme.size(); ++k) lattice_[k] = tileCoordinates(scheme[k]);
 }
 
 TileFrame::~TileFrame() = default;
@@ -50,18 +90,70 @@ std::vector<std::array<double, 2>> TileFrame::toScheme(std::span<const GridPoint
     }
     return out;
   }
-  std::vector<CrsPoint> crs(points.size());
-  std::vector<GeodeticPoint> geodetic(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    crs[i] = dem_.pixelCentre(points[i].col, points[i].row);
-    geodetic[i].height_m = points[i].height_m;
+  // Blocks in parallel; a transformation of a point does not depend on the others in its
+  // call, so the blocks and threads do not change the result.
+  constexpr std::size_t kBlock = 16384;
+  const auto transformBlock = [&](const CrsToWgs84& transform, std::size_t begin, std::size_t end) {
+    std::vector<CrsPoint> crs(end - begin);
+    std::vector<GeodeticPoint> geodetic(end - begin);
+    for (std::size_t i = begin; i < end; ++i) {
+      crs[i - begin] = dem_.pixelCentre(points[i].col, points[i].row);
+      geodetic[i - begin].height_m = points[i].height_m;
+    }
+    transform.transform(crs, geodetic);
+    // Web Mercator ends at +-85.0511 deg: data beyond (a global DEM's polar caps) goes to
+    // the tiles of the first and last rows, as web maps draw it.
+    for (std::size_t i = begin; i < end; ++i) {
+      out[i] = {geodetic[i - begin].lon_deg, insideLatitude(geodetic[i - begin].lat_deg)};
+    }
+  };
+  if (points.size() <= 4 * kBlock) {
+    transformBlock(*to_wgs84_, 0, points.size());
+    return out;
   }
-  to_wgs84_->transform(crs, geodetic);
-  // Web Mercator ends at +-85.0511 deg: data beyond (a global DEM's polar caps) goes to the
-  // tiles of the first and last rows, as web maps draw it.
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    out[i] = {geodetic[i].lon_deg, insideLatitude(geodetic[i].lat_deg)};
+  tbb::parallel_for(std::size_t{0}, (points.size() + kBlock - 1) / kBlock, [&](std::size_t b) {
+    transformBlock(thread_transforms_->local(), b * kBlock, std::min(points.size(), (b + 1) * kBlock));
+  });
+  return out;
+}
+
+std::array<double, 2> TileFrame::tileCoordinates(std::array<double, 2> scheme) const {
+  switch (kind_) {
+    case TileSchemeKind::WebMercator: {
+      const double lat_rad = std::clamp(scheme[1], -kWebMercatorMaxLatitudeDeg, kWebMercatorMaxLatitudeDeg) * M_PI / 180;
+      return {(scheme[0] + 180) / 360, (1 - std::asinh(std::tan(lat_rad)) / M_PI) / 2};
+    }
+    case TileSchemeKind::Geographic:
+      return {(scheme[0] + 180) / 180, (90 - std::clamp(scheme[1], -90.0, 90.0)) / 180};
+    case TileSchemeKind::Local:
+      return {(scheme[0] - local_.origin_x_crs) / local_.root_size_crs, (scheme[1] - local_.origin_y_crs) / local_.root_size_crs};
   }
+  return {0, 0};
+}
+
+std::array<double, 4> TileFrame::approximateTileExtent() const {
+  std::array<double, 4> extent{1e300, 1e300, -1e300, -1e300};
+  for (const auto& p : lattice_) {
+    extent = {std::min(extent[0], p[0]), std::min(extent[1], p[1]), std::max(extent[2], p[0]), std::max(extent[3], p[1])};
+  }
+  return extent;
+}
+
+std::array<double, 2> TileFrame::approximateTileCoordinates(double col, double row) const {
+  constexpr int n = kLatticeCells + 1;
+  const auto cell = [](double at, int size, int& index) {
+    const double t = size > 1 ? std::clamp(at / (size - 1), 0.0, 1.0) * kLatticeCells : 0.0;
+    index = std::min(kLatticeCells - 1, static_cast<int>(t));
+    return t - index;
+  };
+  int i = 0, j = 0;
+  const double fx = cell(col, dem_.width, i), fy = cell(row, dem_.height, j);
+  const auto& a = lattice_[static_cast<std::size_t>(j * n + i)];
+  const auto& b = lattice_[static_cast<std::size_t>(j * n + i + 1)];
+  const auto& c = lattice_[static_cast<std::size_t>((j + 1) * n + i)];
+  const auto& d = lattice_[static_cast<std::size_t>((j + 1) * n + i + 1)];
+  std::array<double, 2> out{};
+  for (std::size_t k = 0; k < 2; ++k) out[k] = (1 - fy) * ((1 - fx) * a[k] + fx * b[k]) + fy * ((1 - fx) * c[k] + fx * d[k]);
   return out;
 }
 
@@ -147,16 +239,63 @@ FaceTiles faceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vect
 
 FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, const FacePartition& partition,
                                    std::int32_t zoom) {
-  const FaceTiles face_tiles = faceTiles(frame, mesh, frame.toScheme(mesh.vertices), zoom);
-  std::vector<std::set<std::pair<std::int32_t, std::int32_t>>> sets(static_cast<std::size_t>(partition.cluster_count));
-  for (std::size_t f = 0; f < mesh.triangleCount(); ++f) {
-    auto& set = sets[static_cast<std::size_t>(partition.cluster_of_face[f])];
-    for (std::size_t i = face_tiles.offset[f]; i < face_tiles.offset[f + 1]; ++i) {
-      set.insert({face_tiles.tiles[i].y, face_tiles.tiles[i].x});
+  const std::vector<std::array<double, 2>> scheme = frame.toScheme(mesh.vertices);
+  const std::size_t face_count = mesh.triangleCount();
+  const auto& idx = mesh.triangle_indices;
+  // (y << 32 | x): sorts as (y, x).
+  const auto keyOf = [](const TileKey& key) {
+    return static_cast<std::uint64_t>(static_cast<std::uint32_t>(key.y)) << 32 | static_cast<std::uint32_t>(key.x);
+  };
+  constexpr std::size_t kBlock = 16384;
+  std::vector<std::uint64_t> vertex_tile(scheme.size());
+  tbb::parallel_for(std::size_t{0}, (scheme.size() + kBlock - 1) / kBlock, [&](std::size_t b) {
+    for (std::size_t v = b * kBlock; v < std::min(scheme.size(), (b + 1) * kBlock); ++v) {
+      vertex_tile[v] = keyOf(frame.tileAt(scheme[v], zoom));
+    }
+  });
+  // A face whose corners lie in one tile lies in it alone (a tile is a rectangle in scheme
+  // coordinates; a corner on its edge is where tileAt puts it, and an edge of the face's box
+  // on a tile edge does not reach the neighbour), so only faces across tile edges need
+  // tilesIntersecting. Those are listed per block, in face order.
+  const std::size_t blocks = (face_count + kBlock - 1) / kBlock;
+  std::vector<std::vector<std::pair<std::uint32_t, std::uint64_t>>> crossing(blocks);  // (face, tile)
+  tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
+    for (std::size_t f = b * kBlock; f < std::min(face_count, (b + 1) * kBlock); ++f) {
+      const std::uint64_t t = vertex_tile[idx[3 * f]];
+      if (vertex_tile[idx[3 * f + 1]] == t && vertex_tile[idx[3 * f + 2]] == t) continue;
+      TileBounds box{1e300, 1e300, -1e300, -1e300};
+      for (std::size_t k = 0; k < 3; ++k) {
+        const auto& p = scheme[idx[3 * f + k]];
+        box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+      }
+      for (const TileKey& key : frame.tilesIntersecting(box, zoom)) crossing[b].push_back({static_cast<std::uint32_t>(f), keyOf(key)});
+    }
+  });
+  // Every cluster's tiles, sorted: each cluster remembers the tile it saw last, so a run of
+  // its faces in one tile costs one comparison.
+  const auto clusters = static_cast<std::size_t>(partition.cluster_count);
+  std::vector<std::vector<std::uint64_t>> sets(clusters);
+  std::vector<std::uint64_t> last(clusters, ~std::uint64_t{0});
+  const auto add = [&](std::size_t cluster, std::uint64_t tile) {
+    if (last[cluster] == tile) return;
+    last[cluster] = tile;
+    auto& set = sets[cluster];
+    const auto at = std::lower_bound(set.begin(), set.end(), tile);
+    if (at == set.end() || *at != tile) set.insert(at, tile);
+  };
+  for (std::size_t b = 0; b < blocks; ++b) {
+    auto next = crossing[b].begin();
+    for (std::size_t f = b * kBlock; f < std::min(face_count, (b + 1) * kBlock); ++f) {
+      const auto cluster = static_cast<std::size_t>(partition.cluster_of_face[f]);
+      if (next != crossing[b].end() && next->first == f) {
+        for (; next != crossing[b].end() && next->first == f; ++next) add(cluster, next->second);
+      } else {
+        add(cluster, vertex_tile[idx[3 * f]]);
+      }
     }
   }
-  std::map<std::set<std::pair<std::int32_t, std::int32_t>>, std::int32_t> group_of_set;
-  std::vector<std::int32_t> group_of_cluster(sets.size(), -1);
+  std::map<std::vector<std::uint64_t>, std::int32_t> group_of_set;
+  std::vector<std::int32_t> group_of_cluster(clusters, -1);
   FacePartition grouped;
   grouped.cluster_of_face.resize(partition.cluster_of_face.size());
   for (std::size_t f = 0; f < grouped.cluster_of_face.size(); ++f) {
@@ -169,6 +308,41 @@ FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, 
   }
   grouped.cluster_count = static_cast<std::int32_t>(group_of_set.size());
   return grouped;
+}
+
+std::vector<std::int32_t> tileNeighbourhoodRegions(const TileFrame& frame, const TinMesh& mesh, std::int32_t zoom) {
+  const std::size_t face_count = mesh.triangleCount();
+  const auto& idx = mesh.triangle_indices;
+  const double tiles = std::ldexp(1.0, zoom);
+  // The blocks over the DEM.
+  const auto blockAt = [&](double x, double y) {
+    const auto tile_x = static_cast<std::int64_t>(std::floor(x * tiles));
+    const auto tile_y = static_cast<std::int64_t>(std::floor(y * tiles));
+    return std::array<std::int64_t, 2>{(tile_x + 1) >> 1, (tile_y + 1) >> 1};
+  };
+  const std::array<double, 4> extent = frame.approximateTileExtent();
+  const std::array<std::int64_t, 2> low = blockAt(extent[0], extent[1]), high = blockAt(extent[2], extent[3]);
+  const std::int64_t columns = high[0] - low[0] + 1;
+  std::vector<std::int32_t> region(face_count);
+  constexpr std::size_t kBlock = 16384;
+  tbb::parallel_for(std::size_t{0}, (face_count + kBlock - 1) / kBlock, [&](std::size_t b) {
+    for (std::size_t f = b * kBlock; f < std::min(face_count, (b + 1) * kBlock); ++f) {
+      const GridPoint &p = mesh.vertices[idx[3 * f]], &q = mesh.vertices[idx[3 * f + 1]], &r = mesh.vertices[idx[3 * f + 2]];
+      const std::array<double, 2> at = frame.approximateTileCoordinates((p.col + q.col + r.col) / 3, (p.row + q.row + r.row) / 3);
+      const auto block = blockAt(at[0], at[1]);
+      const std::int64_t x = std::clamp(block[0], low[0], high[0]) - low[0];
+      const std::int64_t y = std::clamp(block[1], low[1], high[1]) - low[1];
+      region[f] = static_cast<std::int32_t>(y * columns + x);
+    }
+  });
+  return region;
+}
+
+std::function<std::vector<std::int32_t>(const TinMesh&, std::size_t)> tileRegions(const TileFrame& frame,
+                                                                                 std::int32_t max_zoom) {
+  return [&frame, max_zoom](const TinMesh& mesh, std::size_t level) {
+    return tileNeighbourhoodRegions(frame, mesh, max_zoom - static_cast<std::int32_t>(level));
+  };
 }
 
 std::function<FacePartition(const TinMesh&, std::size_t, const FacePartition&)> joinTileClusters(

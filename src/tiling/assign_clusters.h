@@ -74,7 +74,21 @@ class TileFrame {
 
   TileSchemeKind kind() const { return kind_; }
   const LocalTileScheme& local() const { return local_; }
+  // Large inputs are transformed in parallel (TBB), each thread with its own transformation
+  // (PROJ's objects are not shared between threads); every point gets the same coordinates as
+  // on one thread.
   std::vector<std::array<double, 2>> toScheme(std::span<const GridPoint> points) const;
+  // Approximate tile coordinates of a grid point (col, row) in units of zoom-0 tiles: x east
+  // from the scheme's west edge (geographic: 0 to 2), y in the direction the scheme counts
+  // rows (webmercator and geographic: south from the north edge; local: north from the south
+  // edge), so the tile of zoom z is (floor(x 2^z), floor(y 2^z)) away from tile edges.
+  // Bilinear in the exact values (toScheme at height 0, longitudes unwrapped) on a lattice of
+  // 65 x 65 grid points over the DEM: O(1), pure, no transformation. For work that any smooth
+  // approximation serves (partition regions), never for tile membership.
+  std::array<double, 2> approximateTileCoordinates(double col, double row) const;
+  // The smallest and largest approximateTileCoordinates over the DEM: {min x, min y, max x,
+  // max y} (bilinear interpolation stays within its lattice's values).
+  std::array<double, 4> approximateTileExtent() const;
   // The tile holding a point in scheme coordinates (latitude clamped as above; local: the
   // point clamped into the zoom-0 tile).
   TileKey tileAt(std::array<double, 2> point, std::int32_t zoom) const;
@@ -87,10 +101,17 @@ class TileFrame {
   // tile_scheme.h refuses them.
   double insideLatitude(double lat_deg) const;
 
+  // Tile coordinates (approximateTileCoordinates) of exact scheme coordinates.
+  std::array<double, 2> tileCoordinates(std::array<double, 2> scheme) const;
+
   TileSchemeKind kind_;
   const DemGrid& dem_;
   LocalTileScheme local_;
   std::unique_ptr<CrsToWgs84> to_wgs84_;
+  struct ThreadTransforms;  // per-thread CrsToWgs84 for toScheme
+  std::unique_ptr<ThreadTransforms> thread_transforms_;
+  static constexpr int kLatticeCells = 64;
+  std::vector<std::array<double, 2>> lattice_;  // (kLatticeCells + 1)^2 tile coordinates, row-major
 };
 
 struct ZoomPlan {
@@ -118,6 +139,28 @@ struct TileFaces {
 // in order of first appearance.
 FacePartition groupClustersByTiles(const TileFrame& frame, const TinMesh& mesh, const FacePartition& partition,
                                    std::int32_t zoom);
+
+// Regions for partitionFaces (src/partition/partition_faces.h) of a level shown at `zoom`,
+// whose clusters groupClustersByTiles will join by the tiles of zoom - 1: a region per block
+// of 2 x 2 tiles of `zoom` offset by one tile, that is a tile of zoom - 1 shifted by half a
+// tile east and south (tiles x, y of `zoom` with equal (x + 1) / 2 and (y + 1) / 2), holding
+// each face's centroid (the mean of its corners in scheme coordinates). The region outlines,
+// which become cluster borders, run along the middle lines of the zoom - 1 tiles, where the
+// clusters on both sides cross the same tiles of zoom - 1 and are joined again: no tile outline
+// follows them and they are not locked. Outlines along the zoom - 1 tile borders instead (a
+// region per tile) would make every cluster next to a tile border cross it (the faces the
+// border runs through are split by their centroids), and merge would carry twice the
+// overlap in every coarser tile. The centroid's tile comes from
+// TileFrame::approximateTileCoordinates (no transformation per face; a face within a hundredth
+// of a tile of an edge may land on either side, which only moves a region outline by a face).
+// Region ids number the blocks over the DEM row by row (many may hold no face).
+// O(T), parallel over faces.
+std::vector<std::int32_t> tileNeighbourhoodRegions(const TileFrame& frame, const TinMesh& mesh, std::int32_t zoom);
+
+// LevelOptions::partition_regions for levels shown from max_zoom down: level l (zoom
+// max_zoom - l) by tileNeighbourhoodRegions. `frame` must outlive the levels' build.
+std::function<std::vector<std::int32_t>(const TinMesh&, std::size_t)> tileRegions(const TileFrame& frame,
+                                                                                 std::int32_t max_zoom);
 
 // LevelOptions::regroup_clusters for levels shown from max_zoom down (level l at zoom
 // max_zoom - l): level l's clusters are inherited at zoom max_zoom - l - 1, so they are

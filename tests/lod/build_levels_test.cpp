@@ -8,10 +8,13 @@
 #include <map>
 #include <random>
 
+#include <tbb/global_control.h>
+
 #include "formats/dem/read_dem.h"
 #include "src/base/error.h"
 #include "src/lod/build_levels.h"
 #include "src/partition/face_graph.h"
+#include "src/partition/partition_faces.h"
 #include "src/simplify/simplify_clusters.h"
 #include "src/tin/build_tin.h"
 #include "tests/test_support.h"
@@ -50,7 +53,32 @@ std::vector<std::uint64_t> lockedEdges(const TinMesh& mesh, const FaceGraph& gra
   return locked;
 }
 
-void checkLevels(const std::string& raster, double tin_max_error_m, bool with_budget) {
+// Every cluster's faces form one connected piece through shared edges.
+bool clustersConnected(const FaceGraph& graph, const FacePartition& partition) {
+  std::vector<std::uint8_t> seen(graph.faceCount(), 0), started(static_cast<std::size_t>(partition.cluster_count), 0);
+  std::vector<std::size_t> stack;
+  for (std::size_t start = 0; start < graph.faceCount(); ++start) {
+    if (seen[start]) continue;
+    const std::int32_t cluster = partition.cluster_of_face[start];
+    if (started[static_cast<std::size_t>(cluster)]++) return false;
+    seen[start] = 1;
+    stack.assign(1, start);
+    while (!stack.empty()) {
+      const std::size_t t = stack.back();
+      stack.pop_back();
+      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
+        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
+        if (!seen[other] && partition.cluster_of_face[other] == cluster) {
+          seen[other] = 1;
+          stack.push_back(other);
+        }
+      }
+    }
+  }
+  return true;
+}
+
+void checkLevels(const std::string& raster, double tin_max_error_m, bool with_budget, std::int32_t region_clusters = 0) {
   CAPTURE(raster);
   const DemGrid dem = readDem({sharedData(raster)});
   Progress quiet(ProgressMode::Quiet);
@@ -65,6 +93,7 @@ void checkLevels(const std::string& raster, double tin_max_error_m, bool with_bu
   }
   LevelOptions options;
   options.cluster_triangles = 1024;
+  options.region_clusters = region_clusters;
   if (with_budget) options.first_budget_m = 2 * tin_max_error_m;
   const std::vector<Level> levels = buildLevels(dem, finest, options, constraints, quiet);
   MESSAGE(raster << ": " << levels.size() << " levels");
@@ -83,6 +112,7 @@ void checkLevels(const std::string& raster, double tin_max_error_m, bool with_bu
     // from above, the same ground as the finest TIN (area, and no valid pixel uncovered that
     // was covered before, no nodata covered).
     const FaceGraph graph = buildFaceGraph(level.mesh);
+    if (!level.partition.cluster_of_face.empty()) CHECK(clustersConnected(graph, level.partition));
     double area = 0;
     std::size_t flipped = 0;
     for (std::size_t t = 0; t < level.mesh.triangleCount(); ++t) {
@@ -158,6 +188,38 @@ TEST_CASE("cluster levels on the SRTM N57E011 tile (geographic)") {
   checkLevels("srtm3_N57E011_4326.tif", 2.0, false);
 }
 
+TEST_CASE("cluster levels partitioned by grid cells on the SRTM N57E011 tile") {
+  checkLevels("srtm3_N57E011_4326.tif", 2.0, false, 64);
+}
+
+TEST_CASE("cluster levels partitioned by grid cells on the Ontario lidar raster (nodata) with a budget") {
+  checkLevels("ca_on_lidar_dtm_1m_26917.tif", 0.1, true, 64);
+}
+
+TEST_CASE("cluster levels partitioned by grid cells do not depend on the thread count") {
+  const DemGrid dem = readDem({sharedData("srtm3_N57E011_4326.tif")});
+  Progress quiet(ProgressMode::Quiet);
+  const TinMesh finest = buildTin(dem, TinOptions{5.0}, quiet);
+  LevelOptions options;
+  options.cluster_triangles = 512;
+  options.region_clusters = 64;
+  options.coarser_levels = 3;
+  options.simplifier = Simplifier::Native;
+  const auto build = [&](std::size_t threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    return buildLevels(dem, finest, options, {}, quiet);
+  };
+  const std::vector<Level> one = build(1), two = build(2);
+  REQUIRE(one.size() == two.size());
+  REQUIRE(one.size() == 4);
+  CHECK(one[0].partition.cluster_count > 64);  // more than one cell
+  for (std::size_t l = 0; l < one.size(); ++l) {
+    CAPTURE(l);
+    CHECK(one[l].partition.cluster_of_face == two[l].partition.cluster_of_face);
+    CHECK(one[l].mesh.triangle_indices == two[l].mesh.triangle_indices);
+  }
+}
+
 TEST_CASE("ground metres per pixel: projected and geographic") {
   const DemGrid swiss = readDem({sharedData("ch_dhm25_interlaken_25m_2056.tif")});
   const auto swiss_m = groundMetresPerPixel(swiss);
@@ -180,6 +242,10 @@ TEST_CASE("level options out of range are usage errors") {
   options = {};
   options.cluster_triangles = 0;
   CHECK_THROWS_AS(buildLevels(dem, tin, options, {}, quiet), Error);
+  options = {};
+  options.region_clusters = -1;
+  CHECK_THROWS_WITH_AS(buildLevels(dem, tin, options, {}, quiet),
+                       doctest::Contains("the clusters per partition region must be >= 0 (0: global), found -1"), Error);
 }
 
 }  // TEST_SUITE

@@ -10,8 +10,20 @@
 #include <string>
 #include <vector>
 
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <map>
+#include <set>
+
+#include "formats/dem/read_dem.h"
 #include "src/base/error.h"
+#include "src/base/progress.h"
 #include "src/lod/build_levels.h"
+#include "src/partition/face_graph.h"
+#include "src/partition/partition_faces.h"
+#include "src/tin/build_tin.h"
+#include "tests/test_support.h"
 #include "src/tiling/assign_clusters.h"
 #include "src/tiling/tile_scheme.h"
 
@@ -160,5 +172,118 @@ TEST_SUITE("tiling") {
     CHECK(thrownError([&] { mercator.tileAt({10.0, kInfinity}, 3); }).value().code() == ErrorCode::Input);
     CHECK(thrownError([&] { geographic.tilesIntersecting({0.0, 0.0, 1.0, nan}, 3); }).value().code() ==
           ErrorCode::Input);
+  }
+
+  TEST_CASE("toScheme in parallel gives every point the coordinates it gets alone") {
+    const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
+    Progress quiet(ProgressMode::Quiet);
+    const TinMesh tin = buildTin(dem, TinOptions{0.5}, quiet);
+    REQUIRE(tin.vertices.size() > 100000);  // large enough for the parallel path
+    for (const TileSchemeKind kind : {TileSchemeKind::WebMercator, TileSchemeKind::Geographic}) {
+      const TileFrame frame(kind, dem);
+      const std::vector<std::array<double, 2>> all = frame.toScheme(tin.vertices);
+      for (std::size_t v = 0; v < tin.vertices.size(); v += 997) {
+        const std::vector<std::array<double, 2>> one = frame.toScheme(std::span<const GridPoint>(&tin.vertices[v], 1));
+        CHECK(one[0] == all[v]);
+      }
+    }
+  }
+
+  TEST_CASE("approximate tile coordinates stay within a hundredth of a finest tile of the exact ones") {
+    for (const auto& [raster, kind] : {std::pair<const char*, TileSchemeKind>{"srtm3_N57E011_4326.tif", TileSchemeKind::WebMercator},
+                                       {"ch_dhm25_interlaken_25m_2056.tif", TileSchemeKind::WebMercator},
+                                       {"ch_dhm25_interlaken_25m_2056.tif", TileSchemeKind::Geographic},
+                                       {"ch_dhm25_interlaken_25m_2056.tif", TileSchemeKind::Local}}) {
+      CAPTURE(std::string(raster));
+      const DemGrid dem = readDem({test::sharedData(raster)});
+      Progress quiet(ProgressMode::Quiet);
+      const TinMesh tin = buildTin(dem, TinOptions{0.5}, quiet);
+      const TileFrame frame(kind, dem);
+      const ZoomPlan plan = planZooms(frame, tin, 16384, -1, 16);
+      const double tiles = std::ldexp(1.0, plan.max_zoom);
+      const std::vector<std::array<double, 2>> scheme = frame.toScheme(tin.vertices);
+      double worst = 0;
+      for (std::size_t v = 0; v < tin.vertices.size(); ++v) {
+        const std::array<double, 2> approximate = frame.approximateTileCoordinates(tin.vertices[v].col, tin.vertices[v].row);
+        const TileKey tile = frame.tileAt(scheme[v], plan.max_zoom);
+        // The exact point lies in `tile`; the approximate one within 0.01 of a tile of it.
+        const double x = approximate[0] * tiles - tile.x, y = approximate[1] * tiles - tile.y;
+        worst = std::max({worst, -x, x - 1, -y, y - 1});
+      }
+      MESSAGE(std::string(raster) << " zoom " << plan.max_zoom << ": approximate coordinates at most " << worst << " tiles outside the exact tile");
+      CHECK(worst < 0.01);
+    }
+  }
+
+  TEST_CASE("tile neighbourhood regions are blocks of 2 x 2 tiles offset by one tile") {
+    const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
+    Progress quiet(ProgressMode::Quiet);
+    const TinMesh tin = buildTin(dem, TinOptions{0.5}, quiet);
+    const TileFrame frame(TileSchemeKind::WebMercator, dem);
+    const ZoomPlan plan = planZooms(frame, tin, 16384, -1, 16);
+    const std::int32_t zoom = plan.max_zoom;
+    const std::vector<std::int32_t> regions = tileNeighbourhoodRegions(frame, tin, zoom);
+    REQUIRE(regions.size() == tin.triangleCount());
+    const std::vector<std::array<double, 2>> scheme = frame.toScheme(tin.vertices);
+    // Faces well inside a tile (centroid tile the same for the exact and the approximate
+    // centroid): the region is the block ((x + 1) / 2, (y + 1) / 2) of that tile, one region
+    // per block, and no region holds two blocks.
+    std::map<std::pair<std::int32_t, std::int32_t>, std::set<std::int32_t>> regions_of_block;
+    std::map<std::int32_t, std::set<std::pair<std::int32_t, std::int32_t>>> blocks_of_region;
+    std::size_t checked = 0;
+    for (std::size_t t = 0; t < tin.triangleCount(); ++t) {
+      std::array<double, 2> centroid{0, 0};
+      for (std::size_t k = 0; k < 3; ++k) {
+        centroid[0] += scheme[tin.triangle_indices[3 * t + k]][0] / 3;
+        centroid[1] += scheme[tin.triangle_indices[3 * t + k]][1] / 3;
+      }
+      const TileKey tile = frame.tileAt(centroid, zoom);
+      const TileKey a = frame.tileAt({centroid[0] + 0.001, centroid[1] + 0.001}, zoom);
+      const TileKey b = frame.tileAt({centroid[0] - 0.001, centroid[1] - 0.001}, zoom);
+      if (!(a == tile && b == tile)) continue;  // near a tile edge
+      const std::pair block{(tile.x + 1) / 2, (tile.y + 1) / 2};
+      regions_of_block[block].insert(regions[t]);
+      blocks_of_region[regions[t]].insert(block);
+      ++checked;
+    }
+    CHECK(checked > tin.triangleCount() * 9 / 10);
+    CHECK(regions_of_block.size() > 4);
+    for (const auto& [block, set] : regions_of_block) CHECK(set.size() == 1);
+    for (const auto& [region, set] : blocks_of_region) CHECK(set.size() == 1);
+  }
+
+  TEST_CASE("groupClustersByTiles joins exactly the clusters whose faces cross the same tiles") {
+    const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
+    Progress quiet(ProgressMode::Quiet);
+    const TinMesh tin = buildTin(dem, TinOptions{5.0}, quiet);
+    const TileFrame frame(TileSchemeKind::WebMercator, dem);
+    const ZoomPlan plan = planZooms(frame, tin, 16384, -1, 16);
+    const std::int32_t zoom = plan.max_zoom - 1;
+    const FaceGraph graph = buildFaceGraph(tin);
+    const FacePartition partition = partitionFaces(graph, {Partitioner::Metis, plan.clusters_per_level[0], 1},
+                                                   tileNeighbourhoodRegions(frame, tin, plan.max_zoom));
+    const FacePartition grouped = groupClustersByTiles(frame, tin, partition, zoom);
+    // Every face's tiles by tilesIntersecting of its box.
+    const std::vector<std::array<double, 2>> scheme = frame.toScheme(tin.vertices);
+    std::vector<std::set<std::pair<std::int32_t, std::int32_t>>> sets(static_cast<std::size_t>(partition.cluster_count));
+    for (std::size_t t = 0; t < tin.triangleCount(); ++t) {
+      TileBounds box{1e300, 1e300, -1e300, -1e300};
+      for (std::size_t k = 0; k < 3; ++k) {
+        const auto& p = scheme[tin.triangle_indices[3 * t + k]];
+        box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+      }
+      for (const TileKey& key : frame.tilesIntersecting(box, zoom)) {
+        sets[static_cast<std::size_t>(partition.cluster_of_face[t])].insert({key.y, key.x});
+      }
+    }
+    std::map<std::set<std::pair<std::int32_t, std::int32_t>>, std::int32_t> group_of_set;
+    std::vector<std::int32_t> expected(tin.triangleCount());
+    for (std::size_t t = 0; t < tin.triangleCount(); ++t) {
+      const auto& set = sets[static_cast<std::size_t>(partition.cluster_of_face[t])];
+      expected[t] = group_of_set.try_emplace(set, static_cast<std::int32_t>(group_of_set.size())).first->second;
+    }
+    CHECK(grouped.cluster_count == static_cast<std::int32_t>(group_of_set.size()));
+    CHECK(grouped.cluster_of_face == expected);
+    CHECK(grouped.cluster_count < partition.cluster_count);
   }
 }

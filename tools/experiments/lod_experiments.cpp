@@ -2,6 +2,13 @@
 // rasters, printed as tables (paper sections 4.2, 6.1, figs 40 and 42).
 //
 //   terratiles_lod_experiments RASTER[:TIN_MAX_ERROR]... [--runs 5] [--experiment all|partition|rounds|constraints]
+//                              [--clusters 8] [--rounds-clusters 8] [--region-clusters 0]
+//
+// --clusters sets the clusters of experiments 1 and 3, --rounds-clusters those of 2 (the paper
+// used 8 and 64). --region-clusters R > 0 partitions as `terratiles levels --partition
+// regional` does: METIS per square cell of about R clusters (partition_faces.h,
+// clusterCellRegions), and the random partitioner grows inside the same cells; 0 (the default,
+// the paper's) partitions every component in one call.
 //
 // 1. partition: METIS vs random partition (paper fig 40). The finest TIN is split into 8
 //    clusters by each partitioner and simplified once to 50 % of the edges with the cluster
@@ -42,6 +49,8 @@ struct ExperimentOptions {
   int runs = 5;
   std::string experiment = "all";
   int rounds_clusters = 8;  // clusters per round of experiment 2 (the paper used 64 on one TIN)
+  int clusters = 8;         // clusters of experiments 1 and 3
+  int region_clusters = 0;  // > 0: METIS per grid cell of about this many clusters
 };
 
 double parsePositive(const std::string& text, const std::string& what) {
@@ -57,20 +66,25 @@ ExperimentOptions parseOptions(int argc, char** argv) {
   ExperimentOptions options;
   const std::string usage =
       "usage: terratiles_lod_experiments RASTER[:TIN_MAX_ERROR]... [--runs 5] "
-      "[--experiment all|partition|rounds|constraints] [--rounds-clusters 8]";
+      "[--experiment all|partition|rounds|constraints] [--rounds-clusters 8] [--clusters 8] [--region-clusters 0]";
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--help" || arg == "-h") {
       std::printf("%s\n", usage.c_str());
       std::exit(0);
     }
-    if (arg == "--runs" || arg == "--experiment" || arg == "--rounds-clusters") {
+    if (arg == "--runs" || arg == "--experiment" || arg == "--rounds-clusters" || arg == "--clusters" ||
+        arg == "--region-clusters") {
       if (i + 1 >= argc) throw Error(ErrorCode::Usage, arg + " needs a value; " + usage);
       const std::string value = argv[++i];
       if (arg == "--runs") {
         options.runs = static_cast<int>(parsePositive(value, "--runs"));
       } else if (arg == "--rounds-clusters") {
         options.rounds_clusters = static_cast<int>(parsePositive(value, "--rounds-clusters"));
+      } else if (arg == "--clusters") {
+        options.clusters = static_cast<int>(parsePositive(value, "--clusters"));
+      } else if (arg == "--region-clusters") {
+        options.region_clusters = value == "0" ? 0 : static_cast<int>(parsePositive(value, "--region-clusters"));
       } else {
         if (value != "all" && value != "partition" && value != "rounds" && value != "constraints") {
           throw Error(ErrorCode::Usage, "--experiment expects all, partition, rounds or constraints, found '" + value + "'");
@@ -84,6 +98,11 @@ ExperimentOptions parseOptions(int argc, char** argv) {
   }
   if (options.rasters.empty()) throw Error(ErrorCode::Usage, "no raster given; " + usage);
   return options;
+}
+
+std::string regionNote(const ExperimentOptions& options) {
+  return options.region_clusters > 0 ? " (METIS per grid cell of about " + std::to_string(options.region_clusters) + " clusters)"
+                                     : "";
 }
 
 SimplifyOptions halfEdges(const DemGrid& dem) {
@@ -103,15 +122,18 @@ double mean(const std::vector<double>& values) {
 
 // ---- 1. METIS vs random -------------------------------------------------------------------
 
-void partitionExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs) {
+void partitionExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs, int clusters,
+                         int region_clusters) {
   const FaceGraph graph = buildFaceGraph(tin);
+  const std::vector<std::int32_t> regions = clusterCellRegions(tin, clusters, region_clusters, false);
   const SimplifyOptions simplify = halfEdges(dem);
   std::vector<double> max_error[2], rms_error[2], cut[2];
   for (int run = 0; run < runs; ++run) {
     for (int method = 0; method < 2; ++method) {
       std::fprintf(stderr, "%s: partition experiment, run %d, %s\n", name.c_str(), run + 1, method ? "random" : "METIS");
       const FacePartition partition =
-          partitionFaces(graph, {method ? Partitioner::Random : Partitioner::Metis, 8, static_cast<std::uint32_t>(run + 1)});
+          partitionFaces(graph, {method ? Partitioner::Random : Partitioner::Metis, clusters, static_cast<std::uint32_t>(run + 1)},
+                         regions);
       const ClusterSimplification result =
           simplifyClusters(dem, tin, partition.cluster_of_face, partition.cluster_count, {}, simplify);
       const TinErrorStatistics error = measureTin(dem, result.mesh);
@@ -127,7 +149,8 @@ void partitionExperiment(const DemGrid& dem, const TinMesh& tin, const std::stri
 
 // ---- 2. re-partition vs fixed borders -----------------------------------------------------
 
-void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs, int clusters) {
+void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs, int clusters,
+                      int region_clusters) {
   constexpr int kRounds = 5;
   std::vector<double> max_error[2][kRounds + 1], rms_error[2][kRounds + 1], triangles[2][kRounds + 1];
   for (int run = 0; run < runs; ++run) {
@@ -137,6 +160,7 @@ void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string&
       options.clusters_per_level.assign(kRounds, clusters);
       options.coarser_levels = kRounds;
       options.repartition = fixed == 0;
+      options.region_clusters = region_clusters;
       options.seed = static_cast<std::uint32_t>(run + 1);
       Progress quiet(ProgressMode::Quiet);
       const std::vector<Level> levels = buildLevels(dem, tin, options, {}, quiet);
@@ -173,8 +197,10 @@ void roundsExperiment(const DemGrid& dem, const TinMesh& tin, const std::string&
 
 // ---- 3. constraints -----------------------------------------------------------------------
 
-void constraintExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs) {
+void constraintExperiment(const DemGrid& dem, const TinMesh& tin, const std::string& name, int runs, int clusters,
+                          int region_clusters) {
   const FaceGraph graph = buildFaceGraph(tin);
+  const std::vector<std::int32_t> regions = clusterCellRegions(tin, clusters, region_clusters, false);
   const SimplifyOptions simplify = halfEdges(dem);
   const std::size_t edges = meshEdgeKeys(tin).size();
   for (const double share : {0.0, 0.01, 0.05, 0.10, 0.20}) {
@@ -184,7 +210,8 @@ void constraintExperiment(const DemGrid& dem, const TinMesh& tin, const std::str
       // Sets of 8 faces hold about 13 distinct edges.
       const auto sets = static_cast<std::size_t>(std::round(share * static_cast<double>(edges) / 13.0));
       const auto constraints = randomFaceSetConstraints(tin, sets, 8, static_cast<std::uint32_t>(run + 1));
-      const FacePartition partition = partitionFaces(graph, {Partitioner::Metis, 8, static_cast<std::uint32_t>(run + 1)});
+      const FacePartition partition =
+          partitionFaces(graph, {Partitioner::Metis, clusters, static_cast<std::uint32_t>(run + 1)}, regions);
       const ClusterSimplification result =
           simplifyClusters(dem, tin, partition.cluster_of_face, partition.cluster_count, constraints, simplify);
       const TinErrorStatistics error = measureTin(dem, result.mesh);
@@ -218,25 +245,32 @@ int runExperiments(int argc, char** argv) {
   const bool all = options.experiment == "all";
   if (all || options.experiment == "partition") {
     std::printf("\n== 1. METIS vs random partition (paper fig 40: METIS 8.6 m vs random 35.5 m max error on average)\n"
-                "8 clusters, one simplification to 50 %% of the edges, cluster borders locked; mean of %d seeds\n",
-                options.runs);
+                "%d clusters%s, one simplification to 50 %% of the edges, cluster borders locked; mean of %d seeds\n",
+                options.clusters, regionNote(options).c_str(), options.runs);
     std::printf("%-34s %9s %8s %8s %9s %9s %8s %8s %8s\n", "raster @ TIN max error", "triangles", "cut METIS",
                 "cut rand", "max METIS", "max rand", "rms METIS", "rms rand", "rand/METIS");
-    for (const Input& input : inputs) partitionExperiment(input.dem, input.tin, input.name, options.runs);
+    for (const Input& input : inputs) {
+      partitionExperiment(input.dem, input.tin, input.name, options.runs, options.clusters, options.region_clusters);
+    }
   }
   if (all || options.experiment == "rounds") {
     std::printf("\n== 2. five rounds: re-partition every round vs fixed borders (paper fig 42)\n"
-                "METIS %d clusters, each round to 50 %% of the edges, no error budget; mean of %d seeds\n", options.rounds_clusters, options.runs);
+                "METIS %d clusters%s, each round to 50 %% of the edges, no error budget; mean of %d seeds\n",
+                options.rounds_clusters, regionNote(options).c_str(), options.runs);
     std::printf("%-34s %5s %10s %10s %10s %10s %9s %9s\n", "raster @ TIN max error", "round", "tri repart",
                 "tri fixed", "max repart", "max fixed", "rms repart", "rms fixed");
-    for (const Input& input : inputs) roundsExperiment(input.dem, input.tin, input.name, options.runs, options.rounds_clusters);
+    for (const Input& input : inputs) {
+      roundsExperiment(input.dem, input.tin, input.name, options.runs, options.rounds_clusters, options.region_clusters);
+    }
   }
   if (all || options.experiment == "constraints") {
     std::printf("\n== 3. constrained edges vs error (paper 6.1)\n"
-                "random connected sets of 8 faces, all their edges locked; METIS 8 clusters, one simplification to 50 %%; "
-                "mean of %d seeds\n", options.runs);
+                "random connected sets of 8 faces, all their edges locked; METIS %d clusters%s, one simplification to 50 %%; "
+                "mean of %d seeds\n", options.clusters, regionNote(options).c_str(), options.runs);
     std::printf("%-34s %13s %11s %9s %8s\n", "raster @ TIN max error", "constrained", "edges kept", "max [m]", "rms [m]");
-    for (const Input& input : inputs) constraintExperiment(input.dem, input.tin, input.name, options.runs);
+    for (const Input& input : inputs) {
+      constraintExperiment(input.dem, input.tin, input.name, options.runs, options.clusters, options.region_clusters);
+    }
   }
   std::fflush(stdout);
   return 0;

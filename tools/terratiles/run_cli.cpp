@@ -337,6 +337,7 @@ struct LevelsCommandOptions {
   std::string output;
   double tin_max_error_m = 0.5;
   std::string partitioner = "metis";
+  std::string partition_scope = "regional";
   std::string simplifier = "cgal";
   double level_error_growth = 2;  // 0: no budget
   std::size_t random_constraints = 0;
@@ -366,6 +367,9 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
   TinMesh tin = std::move(finest.mesh);
   options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
+  // regional: square cells of the grid of about 64 clusters each (build's tile neighbourhoods
+  // hold 2 x 2 tiles of 16).
+  options.levels.region_clusters = options.partition_scope == "regional" ? 64 : 0;
   options.levels.simplifier = parseSimplifier(options.simplifier);
   if (options.level_error_growth > 0) {
     options.levels.level_error_growth = options.level_error_growth;
@@ -386,6 +390,7 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   summary["crs"] = dem.crs_name;
   summary["tin_max_error_m"] = options.tin_max_error_m;
   summary["partitioner"] = options.partitioner;
+  summary["partition"] = options.partition_scope;
   summary["simplifier"] = options.simplifier;
   summary["cluster_triangles"] = options.levels.cluster_triangles;
   summary["level_ratio"] = options.levels.level_ratio;
@@ -500,6 +505,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   build_command->add_flag("--no-join-tile-clusters", [&build](std::int64_t) { build.join_tile_clusters = false; },
                           "merge: keep every METIS cluster border locked, instead of simplifying the clusters that "
                           "cross the same tiles as one (paper fig 34)");
+  std::string build_partition = "regional";
+  build_command
+      ->add_option("--partition", build_partition,
+                   "How METIS sees a level: regional (per tile neighbourhood, in parallel) or global (one k-way call "
+                   "over the whole level, seconds for thousands of clusters; for comparison)")
+      ->check(CLI::IsMember({"regional", "global"}))
+      ->capture_default_str();
   build_command
       ->add_option("--clusters-per-tile", build.clusters_per_tile,
                    "Clusters a level is split into per tile of its zoom (paper: about 4); more make thinner "
@@ -643,6 +655,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->check(CLI::IsMember({"metis", "random"}))
       ->capture_default_str();
   levels_command
+      ->add_option("--partition", levels.partition_scope,
+                   "How METIS sees a level: regional (square cells of the grid of about 64 clusters each, in "
+                   "parallel; the cell outlines move from level to level) or global (one k-way call over the whole "
+                   "level, seconds for thousands of clusters)")
+      ->check(CLI::IsMember({"regional", "global"}))
+      ->capture_default_str();
+  levels_command
       ->add_option("--random-constraints", levels.random_constraints,
                    "Lock every edge of N random connected sets of 8 triangles at every level "
                    "(the paper's stand-in for roads and buildings)")
@@ -758,6 +777,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   if (build_command->parsed()) {
     build.lod = lod_choice == "grid" ? LodMethod::Grid : LodMethod::Clusters;
     build.simplifier = parseSimplifier(build_simplifier);
+    build.global_partition = build_partition == "global";
     build.scheme = parseTileSchemeKind(scheme_choice);
     build.assignment = parseAssignment(assign_choice);
     if (build_heights.heights == "ellipsoidal") {
