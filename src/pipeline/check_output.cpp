@@ -28,7 +28,7 @@
 #include "src/geo/dem_on_globe.h"
 #include "src/geo/geoid.h"
 #include "src/pipeline/drawn_tiles.h"
-#include "src/pipeline/largest_first.h"
+#include "src/base/largest_first.h"
 #include "src/tiling/tile_key.h"
 #include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"

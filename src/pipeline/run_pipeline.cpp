@@ -41,7 +41,7 @@
 #include "src/pipeline/report_maps.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/pipeline/drawn_tiles.h"
-#include "src/pipeline/largest_first.h"
+#include "src/base/largest_first.h"
 #include "src/simplify/simplify_clusters.h"
 #include "src/tin/measure_tin.h"
 #include "src/geo/dem_on_globe.h"

@@ -7,11 +7,7 @@
 // simplify the clusters.
 
 #include <algorithm>
-#include <tbb/task_arena.h>
-#include <tbb/task_group.h>
-
 #include <array>
-#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -19,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "src/base/largest_first.h"
 #include "src/dem/dem_grid.h"
 #include "src/geo/crs_transform.h"
 #include "src/simplify/simplify_clusters.h"
@@ -198,21 +195,13 @@ bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const Gri
 // core idle at the end. (Where each cluster's result goes does not depend on the order.)
 template <typename Simplify>
 void forEachClusterLargestFirst(const std::vector<std::uint32_t>& cluster_start, Simplify&& simplify) {
-  std::vector<std::uint32_t> order;
+  std::vector<std::size_t> order;
   for (std::uint32_t c = 0; c + 1 < cluster_start.size(); ++c) {
     if (cluster_start[c] != cluster_start[c + 1]) order.push_back(c);
   }
-  const auto size = [&](std::uint32_t c) { return cluster_start[c + 1] - cluster_start[c]; };
-  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return size(a) > size(b); });
-  std::atomic<std::size_t> next{0};
-  tbb::task_group workers;
-  const int threads = std::max(1, std::min<int>(tbb::this_task_arena::max_concurrency(), static_cast<int>(order.size())));
-  for (int w = 0; w < threads; ++w) {
-    workers.run([&] {
-      for (std::size_t i = next++; i < order.size(); i = next++) simplify(order[i]);
-    });
-  }
-  workers.wait();
+  const auto size = [&](std::size_t c) { return cluster_start[c + 1] - cluster_start[c]; };
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return size(a) > size(b); });
+  forEachLargestFirst(order, [&](std::size_t c) { simplify(static_cast<std::uint32_t>(c)); });
 }
 
 // The engines: one ClusterOutput per cluster id (empty for an empty cluster).

@@ -1,6 +1,6 @@
 #pragma once
-// forEachLargestFirst: runs independent jobs of very different sizes (the tiles of a zoom:
-// from a few hundred triangles to a hundred thousand) on TBB's threads so that the largest
+// forEachLargestFirst: runs independent jobs of very different sizes (the tiles of a zoom, the
+// clusters of a level: from a few hundred triangles to a hundred thousand) on TBB's threads so that the largest
 // start first and the small ones fill in at the end: every free thread takes the next job of
 // `order`, a greedy schedule that leaves at most one small job's time idle at the end, where
 // a split of the index range can leave a thread idle for a large job's whole time.
