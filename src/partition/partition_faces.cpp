@@ -545,6 +545,33 @@ FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& opt
   return region_of_face.empty() ? globalPartition(graph, options) : regionalPartition(graph, options, region_of_face);
 }
 
+bool clustersAreContiguous(const FaceGraph& graph, const FacePartition& partition) {
+  const std::size_t faces = graph.faceCount();
+  if (partition.cluster_of_face.size() != faces || partition.cluster_count < 0) return false;
+  std::vector<std::uint8_t> seen(faces, 0), started(static_cast<std::size_t>(partition.cluster_count), 0);
+  std::vector<std::size_t> stack;
+  for (std::size_t start = 0; start < faces; ++start) {
+    if (seen[start]) continue;
+    const std::int32_t cluster = partition.cluster_of_face[start];
+    if (cluster < 0 || cluster >= partition.cluster_count || started[static_cast<std::size_t>(cluster)]) return false;
+    started[static_cast<std::size_t>(cluster)] = 1;
+    seen[start] = 1;
+    stack.assign(1, start);
+    while (!stack.empty()) {
+      const std::size_t t = stack.back();
+      stack.pop_back();
+      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
+        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
+        if (!seen[other] && partition.cluster_of_face[other] == cluster) {
+          seen[other] = 1;
+          stack.push_back(other);
+        }
+      }
+    }
+  }
+  return std::all_of(started.begin(), started.end(), [](std::uint8_t s) { return s != 0; });
+}
+
 std::size_t edgeCut(const FaceGraph& graph, const std::vector<std::int32_t>& cluster_of_face) {
   std::size_t cut = 0;
   for (std::size_t t = 0; t < graph.faceCount(); ++t) {

@@ -63,6 +63,11 @@ struct FacePartition {
 FacePartition partitionFaces(const FaceGraph& graph, const PartitionOptions& options,
                              std::span<const std::int32_t> region_of_face = {});
 
+// True when every cluster id in [0, cluster_count) is used and each cluster's faces form one
+// connected piece through shared edges (what partitionFaces promises for METIS and random
+// growth on a mesh whose components each get their own clusters).
+bool clustersAreContiguous(const FaceGraph& graph, const FacePartition& partition);
+
 // The number of graph edges whose two faces are in different clusters (METIS's edge cut).
 std::size_t edgeCut(const FaceGraph& graph, const std::vector<std::int32_t>& cluster_of_face);
 

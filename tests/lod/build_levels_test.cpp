@@ -53,30 +53,6 @@ std::vector<std::uint64_t> lockedEdges(const TinMesh& mesh, const FaceGraph& gra
   return locked;
 }
 
-// Every cluster's faces form one connected piece through shared edges.
-bool clustersConnected(const FaceGraph& graph, const FacePartition& partition) {
-  std::vector<std::uint8_t> seen(graph.faceCount(), 0), started(static_cast<std::size_t>(partition.cluster_count), 0);
-  std::vector<std::size_t> stack;
-  for (std::size_t start = 0; start < graph.faceCount(); ++start) {
-    if (seen[start]) continue;
-    const std::int32_t cluster = partition.cluster_of_face[start];
-    if (started[static_cast<std::size_t>(cluster)]++) return false;
-    seen[start] = 1;
-    stack.assign(1, start);
-    while (!stack.empty()) {
-      const std::size_t t = stack.back();
-      stack.pop_back();
-      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
-        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-        if (!seen[other] && partition.cluster_of_face[other] == cluster) {
-          seen[other] = 1;
-          stack.push_back(other);
-        }
-      }
-    }
-  }
-  return true;
-}
 
 void checkLevels(const std::string& raster, double tin_max_error_m, bool with_budget, std::int32_t region_clusters = 0) {
   CAPTURE(raster);
@@ -112,7 +88,7 @@ void checkLevels(const std::string& raster, double tin_max_error_m, bool with_bu
     // from above, the same ground as the finest TIN (area, and no valid pixel uncovered that
     // was covered before, no nodata covered).
     const FaceGraph graph = buildFaceGraph(level.mesh);
-    if (!level.partition.cluster_of_face.empty()) CHECK(clustersConnected(graph, level.partition));
+    if (!level.partition.cluster_of_face.empty()) CHECK(clustersAreContiguous(graph, level.partition));
     double area = 0;
     std::size_t flipped = 0;
     for (std::size_t t = 0; t < level.mesh.triangleCount(); ++t) {

@@ -26,31 +26,6 @@ TinMesh realTin(const std::string& raster, double max_error_m) {
   return buildTin(dem, TinOptions{max_error_m}, quiet);
 }
 
-// Faces of each cluster form one connected piece through shared edges.
-bool clustersContiguous(const FaceGraph& graph, const FacePartition& partition) {
-  std::vector<std::uint8_t> seen(graph.faceCount(), 0);
-  std::vector<std::uint8_t> cluster_started(static_cast<std::size_t>(partition.cluster_count), 0);
-  for (std::size_t start = 0; start < graph.faceCount(); ++start) {
-    if (seen[start]) continue;
-    const std::int32_t cluster = partition.cluster_of_face[start];
-    if (cluster_started[static_cast<std::size_t>(cluster)]) return false;  // a second piece
-    cluster_started[static_cast<std::size_t>(cluster)] = 1;
-    std::vector<std::size_t> stack{start};
-    seen[start] = 1;
-    while (!stack.empty()) {
-      const std::size_t t = stack.back();
-      stack.pop_back();
-      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
-        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-        if (!seen[other] && partition.cluster_of_face[other] == cluster) {
-          seen[other] = 1;
-          stack.push_back(other);
-        }
-      }
-    }
-  }
-  return true;
-}
 
 // Faces in one cluster are in one connected component of the mesh.
 bool clustersWithinComponents(const FaceGraph& graph, const FacePartition& partition) {
@@ -137,8 +112,8 @@ TEST_CASE("METIS clusters are contiguous, dense, deterministic and cut fewer edg
       CHECK(random.cluster_count == k);
       checkIdsDense(metis);
       checkIdsDense(random);
-      CHECK(clustersContiguous(graph, metis));
-      CHECK(clustersContiguous(graph, random));
+      CHECK(clustersAreContiguous(graph, metis));
+      CHECK(clustersAreContiguous(graph, random));
       CHECK(partitionFaces(graph, {Partitioner::Metis, k, 7}).cluster_of_face == metis.cluster_of_face);
       CHECK(partitionFaces(graph, {Partitioner::Random, k, 7}).cluster_of_face == random.cluster_of_face);
       CHECK(partitionFaces(graph, {Partitioner::Random, k, 8}).cluster_of_face != random.cluster_of_face);
@@ -249,8 +224,8 @@ TEST_CASE("regional METIS clusters on real TINs are contiguous dense determinist
     const FacePartition random = partitionFaces(graph, {Partitioner::Random, clusters, 7}, regions);
     checkIdsDense(regional);
     checkIdsDense(random);
-    CHECK(clustersContiguous(graph, regional));
-    CHECK(clustersContiguous(graph, random));
+    CHECK(clustersAreContiguous(graph, regional));
+    CHECK(clustersAreContiguous(graph, random));
     CHECK(clustersWithinComponents(graph, regional));
     CHECK(std::abs(regional.cluster_count - clusters) <= clusters / 20);
     CHECK(partitionFaces(graph, {Partitioner::Metis, clusters, 7}, regions).cluster_of_face == regional.cluster_of_face);
@@ -298,7 +273,7 @@ TEST_CASE("a region's fragment joins a neighbouring cluster and regions never me
   regions[grid_faces] = regions[grid_faces + 1] = 5;
   const FacePartition partition = partitionFaces(graph, {Partitioner::Metis, 8, 1}, regions);
   checkIdsDense(partition);
-  CHECK(clustersContiguous(graph, partition));
+  CHECK(clustersAreContiguous(graph, partition));
   CHECK(clustersWithinComponents(graph, partition));
   // The stray triangle is in a cluster of the right half; the quad is a cluster of its own.
   std::set<std::int32_t> left, right;

@@ -117,32 +117,8 @@ BenchOptions parseOptions(int argc, char** argv) {
 
 // Dense ids and one connected piece per cluster; Error(Internal) naming `what` otherwise.
 void checkPartition(const FaceGraph& graph, const FacePartition& partition, const std::string& what) {
-  const std::size_t n = graph.faceCount();
-  std::vector<std::uint8_t> used(static_cast<std::size_t>(partition.cluster_count), 0), seen(n, 0);
-  std::vector<std::size_t> stack;
-  for (std::size_t start = 0; start < n; ++start) {
-    if (seen[start]) continue;
-    const std::int32_t cluster = partition.cluster_of_face[start];
-    if (cluster < 0 || cluster >= partition.cluster_count || used[static_cast<std::size_t>(cluster)]) {
-      throw Error(ErrorCode::Internal, what + ": cluster " + std::to_string(cluster) + " is out of range or in two pieces");
-    }
-    used[static_cast<std::size_t>(cluster)] = 1;
-    seen[start] = 1;
-    stack.push_back(start);
-    while (!stack.empty()) {
-      const std::size_t t = stack.back();
-      stack.pop_back();
-      for (std::int32_t k = graph.offsets[t]; k < graph.offsets[t + 1]; ++k) {
-        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(k)]);
-        if (!seen[other] && partition.cluster_of_face[other] == cluster) {
-          seen[other] = 1;
-          stack.push_back(other);
-        }
-      }
-    }
-  }
-  for (const std::uint8_t u : used) {
-    if (!u) throw Error(ErrorCode::Internal, what + ": a cluster id is unused");
+  if (!clustersAreContiguous(graph, partition)) {
+    throw Error(ErrorCode::Internal, what + ": a cluster id is out of range, unused or in two pieces");
   }
 }
 
