@@ -3,13 +3,15 @@
 // on the same meshes and the same METIS clusters, on one core.
 //
 //   terratiles_bench_lod RASTER... [--tin-max-error 0.5] [--levels 4] [--cluster-triangles 1024]
-//                        [--runs 3] [--simplifier native|cgal]
+//                        [--region-clusters 64] [--runs 3] [--simplifier native|cgal]
 //
 // For each raster: reads it with readDem and builds the finest TIN once (buildTin at
 // --tin-max-error, untimed, all cores). Then --levels levels on ONE thread
 // (tbb::global_control max_allowed_parallelism 1). At each level:
 //   partition  buildFaceGraph + partitionFaces of the current mesh, METIS, k = ceil(triangles /
-//              --cluster-triangles), seed 1 + level index (as buildLevels does);
+//              --cluster-triangles), seed 1 + level index, by grid cells of about
+//              --region-clusters clusters (clusterCellRegions, offset on every other level), as
+//              buildLevels does for `terratiles levels` (0: one METIS call per level);
 //   terratiles simplifyClusters on that mesh and those clusters: edge_ratio 0.5, no error
 //              budget, ground metres per pixel from groundMetresPerPixel;
 //   meshopt    the same mesh and clusters: every cluster's faces as a submesh with local vertex
@@ -82,16 +84,21 @@ struct BenchOptions {
   double tin_max_error_m = 0.5;
   int levels = 4;
   int cluster_triangles = 1024;
+  int region_clusters = 64;  // METIS per grid cell of about this many clusters (0: one call)
   int runs = 3;
   Simplifier simplifier = Simplifier::Native;
 };
 
 constexpr const char* kUsage =
     "usage: terratiles_bench_lod RASTER... [--tin-max-error 0.5] [--levels 4]\n"
-    "                            [--cluster-triangles 1024] [--runs 3] [--simplifier native]\n"
+    "                            [--cluster-triangles 1024] [--region-clusters 64] [--runs 3]\n"
+    "                            [--simplifier native]\n"
     "  --tin-max-error      max vertical error of the finest TIN, metres (default 0.5; 10 suits SRTM)\n"
     "  --levels             coarser levels to build, each from the one before (default 4)\n"
     "  --cluster-triangles  METIS clusters per level: ceil(triangles / this) (default 1024)\n"
+    "  --region-clusters    METIS on each square cell of the grid of about this many clusters, as\n"
+    "                       `terratiles levels --partition regional` does; 0: one METIS call per\n"
+    "                       level (`--partition global`) (default 64)\n"
     "  --runs               timed runs per step and level, after one untimed warm-up; the median\n"
     "                       is reported (default 3)\n"
     "  --simplifier         terratiles' engine: native (default) or cgal (the reference)\n";
@@ -126,6 +133,8 @@ BenchOptions parseOptions(int argc, char** argv) {
       options.levels = parseCount(value(), arg, 1, 64);
     } else if (arg == "--cluster-triangles") {
       options.cluster_triangles = parseCount(value(), arg, 1, std::numeric_limits<std::int32_t>::max());
+    } else if (arg == "--region-clusters") {
+      options.region_clusters = parseCount(value(), arg, 0, std::numeric_limits<std::int32_t>::max());
     } else if (arg == "--runs") {
       options.runs = parseCount(value(), arg, 1, 1000);
     } else if (arg == "--simplifier") {
@@ -299,9 +308,13 @@ RasterSummary benchRaster(const std::string& path, const BenchOptions& options) 
   std::printf("finest TIN at %g m: %zu triangles, %zu vertices, max %.3f m, rms %.4f m (built untimed)\n",
               options.tin_max_error_m, current.triangleCount(), current.vertices.size(),
               finest_error.max_error_m, finest_error.rms_error_m);
-  std::printf("one thread; terratiles' %s engine; per step 1 warm-up + %d timed runs, medians; both tools "
-              "simplify the same mesh (terratiles' previous level) with the same clusters to %g\n",
-              options.simplifier == Simplifier::Cgal ? "cgal" : "native", options.runs, kLevelRatio);
+  std::printf("one thread; terratiles' %s engine; METIS %s; per step 1 warm-up + %d timed runs, medians; both "
+              "tools simplify the same mesh (terratiles' previous level) with the same clusters to %g\n",
+              options.simplifier == Simplifier::Cgal ? "cgal" : "native",
+              options.region_clusters > 0
+                  ? ("per grid cell of about " + std::to_string(options.region_clusters) + " clusters").c_str()
+                  : "one call per level",
+              options.runs, kLevelRatio);
   printHeader();
 
   // Everything timed runs on one core: meshoptimizer is single-threaded, simplifyClusters and
@@ -331,7 +344,12 @@ RasterSummary benchRaster(const std::string& path, const BenchOptions& options) 
     std::vector<double> partition_runs;
     for (int r = 0; r <= options.runs; ++r) {
       FacePartition run;
-      const double seconds = secondsOf([&] { run = partitionFaces(buildFaceGraph(current), partition_options); });
+      // The regions as buildLevels makes them (its level index is ours - 1), timed with METIS.
+      const double seconds = secondsOf([&] {
+        const std::vector<std::int32_t> regions = clusterCellRegions(current, partition_options.clusters,
+                                                                     options.region_clusters, (level - 1) % 2 == 1);
+        run = partitionFaces(buildFaceGraph(current), partition_options, regions);
+      });
       if (r == 0) {
         partition = std::move(run);
         continue;
