@@ -160,14 +160,11 @@ void coveredValidPixels(const DemGrid& dem, const GridPoint& a, const GridPoint&
 #if defined(__x86_64__)
   if (kHasAvx2) {
     // forEachCoveredPixel's box and tolerance.
-    const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+    const CoveredPixelBox box = coveredPixelBox(dem, a, b, c);
+    const double area2 = box.area2, eps = box.eps;
     if (area2 == 0) return;
-    const double eps = 1e-9 * std::fabs(area2);
-    const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
-    const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
-    const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
-    const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
-    for (int row = min_row; row <= max_row; ++row) {
+    const int min_col = box.min_col, max_col = box.max_col;
+    for (int row = box.min_row; row <= box.max_row; ++row) {
       for (int col = min_col; col <= max_col; col += 4) {
         unsigned inside = covered4(a, b, c, area2, eps, col, row);
         if (max_col - col < 3) inside &= (1u << (max_col - col + 1)) - 1;

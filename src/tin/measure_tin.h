@@ -42,18 +42,32 @@ TinErrorStatistics measureTin(const DemOnGlobe& globe, const TinMesh& mesh, std:
 // grid. Calls visit(pixel_index, height_of_the_triangle_there) for each, row by row; stops
 // early when visit returns false. Nothing is visited for a triangle of zero area. Shared so
 // that whatever bounds a triangle's error (the simplifier's budget) agrees with measureTin.
+// forEachCoveredPixel's doubled signed area in the grid, its tolerance (1e-9 of the area)
+// and the grid's pixels within the triangle's bounding box (empty when max < min).
+struct CoveredPixelBox {
+  double area2 = 0;
+  double eps = 0;
+  int min_col = 0, max_col = -1, min_row = 0, max_row = -1;
+};
+inline CoveredPixelBox coveredPixelBox(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+  CoveredPixelBox box;
+  box.area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+  box.eps = 1e-9 * std::fabs(box.area2);
+  box.min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
+  box.max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
+  box.min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
+  box.max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
+  return box;
+}
+
 template <typename Visit>
 void forEachCoveredPixel(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                          Visit&& visit) {
-  const double area2 = (b.col - a.col) * (c.row - a.row) - (b.row - a.row) * (c.col - a.col);
+  const CoveredPixelBox box = coveredPixelBox(dem, a, b, c);
+  const double area2 = box.area2, eps = box.eps;
   if (area2 == 0) return;
-  const double eps = 1e-9 * std::fabs(area2);
-  const int min_col = std::max(0, static_cast<int>(std::ceil(std::min({a.col, b.col, c.col}) - 1e-9)));
-  const int max_col = std::min(dem.width - 1, static_cast<int>(std::floor(std::max({a.col, b.col, c.col}) + 1e-9)));
-  const int min_row = std::max(0, static_cast<int>(std::ceil(std::min({a.row, b.row, c.row}) - 1e-9)));
-  const int max_row = std::min(dem.height - 1, static_cast<int>(std::floor(std::max({a.row, b.row, c.row}) + 1e-9)));
-  for (int row = min_row; row <= max_row; ++row) {
-    for (int col = min_col; col <= max_col; ++col) {
+  for (int row = box.min_row; row <= box.max_row; ++row) {
+    for (int col = box.min_col; col <= box.max_col; ++col) {
       const double wa = ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)) / area2;
       const double wb = ((c.col - col) * (a.row - row) - (c.row - row) * (a.col - col)) / area2;
       const double wc = 1.0 - wa - wb;
