@@ -168,7 +168,7 @@ void buildFaceGraph(const TinMesh& mesh, FaceGraph& graph) {
 
 std::int32_t faceComponents(const FaceGraph& graph, std::vector<std::int32_t>& component_of_face) {
   const std::size_t face_count = graph.faceCount();
-  component_of_face.assign(face_count, -1);
+  detail::assignOnHugePages(component_of_face, face_count, -1);
   std::int32_t components = 0;
   std::vector<std::int32_t> stack;
   for (std::size_t start = 0; start < face_count; ++start) {

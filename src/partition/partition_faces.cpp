@@ -54,13 +54,11 @@ namespace {
 
 static_assert(sizeof(idx_t) == sizeof(std::int32_t), "METIS built with 32-bit idx_t expected");
 
-// The faces of one piece as a graph of its own (local ids: positions in `faces`). A face is in
-// the piece when it has the piece's number and (given regions) its region.
-void pieceGraph(const FaceGraph& graph, std::span<const std::int32_t> faces, const std::vector<std::int32_t>& piece_of_face,
-                std::span<const std::int32_t> region_of_face, const std::vector<std::int32_t>& local_of_face,
-                detail::PieceGraph& piece) {
-  const auto piece_id = piece_of_face[static_cast<std::size_t>(faces.front())];
-  const std::int32_t region = region_of_face.empty() ? 0 : region_of_face[static_cast<std::size_t>(faces.front())];
+// The faces of one group (a component or a region: every face with the label of `faces`) as a
+// graph of its own, local ids being positions in `faces`; edges to other groups are left out.
+void pieceGraph(const FaceGraph& graph, std::span<const std::int32_t> faces, std::span<const std::int32_t> label_of_face,
+                std::span<const std::int32_t> local_of_face, detail::PieceGraph& piece) {
+  const std::int32_t label = label_of_face[static_cast<std::size_t>(faces.front())];
   piece.xadj.resize(faces.size() + 1);
   piece.xadj[0] = 0;
   piece.adjncy.clear();
@@ -69,9 +67,7 @@ void pieceGraph(const FaceGraph& graph, std::span<const std::int32_t> faces, con
     const auto t = static_cast<std::size_t>(faces[i]);
     for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
       const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-      if ((region_of_face.empty() || region_of_face[other] == region) && piece_of_face[other] == piece_id) {
-        piece.adjncy.push_back(local_of_face[other]);  // not across pieces
-      }
+      if (label_of_face[other] == label) piece.adjncy.push_back(local_of_face[other]);
     }
     piece.xadj[i + 1] = static_cast<std::int32_t>(piece.adjncy.size());
   }
@@ -140,37 +136,9 @@ void randomParts(const detail::PieceGraph& piece, std::int32_t parts, std::mt199
   }
 }
 
-// Pieces: faces joined through shared edges (and, with regions, of one region), numbered in
-// order of their lowest face. Returns the piece count.
-std::int32_t connectedPieces(const FaceGraph& graph, std::span<const std::int32_t> region_of_face,
-                             std::vector<std::int32_t>& piece_of_face) {
-  const std::size_t face_count = graph.faceCount();
-  detail::assignOnHugePages(piece_of_face, face_count, -1);
-  std::int32_t pieces = 0;
-  std::vector<std::int32_t> stack;
-  for (std::size_t start = 0; start < face_count; ++start) {
-    if (piece_of_face[start] >= 0) continue;
-    piece_of_face[start] = pieces;
-    stack.push_back(static_cast<std::int32_t>(start));
-    while (!stack.empty()) {
-      const auto t = static_cast<std::size_t>(stack.back());
-      stack.pop_back();
-      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
-        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-        if (piece_of_face[other] < 0 && (region_of_face.empty() || region_of_face[other] == region_of_face[t])) {
-          piece_of_face[other] = pieces;
-          stack.push_back(static_cast<std::int32_t>(other));
-        }
-      }
-    }
-    ++pieces;
-  }
-  return pieces;
-}
-
 // Faces grouped by piece (each group in face order) as CSR, and each face's position in its
 // group.
-void facesByPiece(const std::vector<std::int32_t>& piece_of_face, std::int32_t pieces, std::vector<std::int32_t>& first,
+void facesByPiece(std::span<const std::int32_t> piece_of_face, std::int32_t pieces, std::vector<std::int32_t>& first,
                   std::vector<std::int32_t>& faces, std::vector<std::int32_t>& local_of_face) {
   first.assign(static_cast<std::size_t>(pieces) + 1, 0);
   for (const std::int32_t p : piece_of_face) ++first[static_cast<std::size_t>(p) + 1];
@@ -221,7 +189,7 @@ FacePartition globalPartition(const FaceGraph& graph, const PartitionOptions& op
   const std::size_t face_count = graph.faceCount();
   FacePartition result;
   std::vector<std::int32_t> piece_of_face;
-  const std::int32_t pieces = connectedPieces(graph, {}, piece_of_face);
+  const std::int32_t pieces = faceComponents(graph, piece_of_face);
   std::vector<std::int32_t> first, faces, local_of_face;
   facesByPiece(piece_of_face, pieces, first, faces, local_of_face);
   const auto facesOf = [&](std::size_t p) {
@@ -245,7 +213,7 @@ FacePartition globalPartition(const FaceGraph& graph, const PartitionOptions& op
   std::vector<std::int32_t> part;
   for (std::size_t p = 0; p < parts_of.size(); ++p) {
     if (parts_of[p] == 1) continue;
-    pieceGraph(graph, facesOf(p), piece_of_face, {}, local_of_face, piece);
+    pieceGraph(graph, facesOf(p), piece_of_face, local_of_face, piece);
     if (options.method == Partitioner::Random) {
       randomParts(piece, parts_of[p], random, part);
     } else {
@@ -295,19 +263,8 @@ FacePartition regionalPartition(const FaceGraph& graph, const PartitionOptions& 
   }
   const auto regions = static_cast<std::size_t>(highest) + 1;
   // The faces of every region in face order, and each face's position in its region.
-  std::vector<std::int32_t> region_first(regions + 1, 0), region_faces, local_of_face;
-  for (const std::int32_t r : region) ++region_first[static_cast<std::size_t>(r) + 1];
-  for (std::size_t r = 0; r < regions; ++r) region_first[r + 1] += region_first[r];
-  detail::resizeOnHugePages(region_faces, face_count);
-  detail::resizeOnHugePages(local_of_face, face_count);
-  {
-    std::vector<std::int32_t> fill(region_first.begin(), region_first.end() - 1);
-    for (std::size_t t = 0; t < face_count; ++t) {
-      const auto r = static_cast<std::size_t>(region[t]);
-      local_of_face[t] = fill[r] - region_first[r];
-      region_faces[static_cast<std::size_t>(fill[r]++)] = static_cast<std::int32_t>(t);
-    }
-  }
+  std::vector<std::int32_t> region_first, region_faces, local_of_face;
+  facesByPiece(region, static_cast<std::int32_t>(regions), region_first, region_faces, local_of_face);
   const double faces_per_cluster = static_cast<double>(face_count) / static_cast<double>(options.clusters);
   const auto min_faces = static_cast<std::size_t>(std::ceil(faces_per_cluster / 2));
 
@@ -331,21 +288,9 @@ FacePartition regionalPartition(const FaceGraph& graph, const PartitionOptions& 
     const std::span<const std::int32_t> faces(region_faces.data() + region_first[r],
                                               static_cast<std::size_t>(region_first[r + 1] - region_first[r]));
     if (faces.empty()) return;
-    const auto region_id = static_cast<std::int32_t>(r);
     // The region as a graph of its own (local ids: positions in `faces`).
     detail::PieceGraph& local = work.graph;
-    local.xadj.resize(faces.size() + 1);
-    local.xadj[0] = 0;
-    local.adjncy.clear();
-    local.adjncy.reserve(3 * faces.size());
-    for (std::size_t i = 0; i < faces.size(); ++i) {
-      const auto t = static_cast<std::size_t>(faces[i]);
-      for (std::int32_t n = graph.offsets[t]; n < graph.offsets[t + 1]; ++n) {
-        const auto other = static_cast<std::size_t>(graph.neighbours[static_cast<std::size_t>(n)]);
-        if (region[other] == region_id) local.adjncy.push_back(local_of_face[other]);
-      }
-      local.xadj[i + 1] = static_cast<std::int32_t>(local.adjncy.size());
-    }
+    pieceGraph(graph, faces, region, local_of_face, local);
     // Its connected pieces, numbered in order of their lowest face.
     std::vector<std::int32_t>& component = work.component;
     component.assign(faces.size(), -1);
