@@ -169,6 +169,8 @@ const std::vector<std::string>& CrsToWgs84::warnings() const { return impl_->war
 
 const std::string& CrsToWgs84::sourceName() const { return impl_->source_name; }
 
+bool CrsToWgs84::isWgs84LonLat() const { return impl_->is_wgs84; }
+
 std::string CrsToWgs84::pathDescription() const {
   if (impl_->is_wgs84) return impl_->source_name + " is WGS84 longitude and latitude (no transformation)";
   return impl_->rigorous_lv95 ? impl_->source_name + " -> WGS84 by the rigorous swisstopo formulas"

@@ -57,6 +57,8 @@ class CrsToWgs84 {
   // "EPSG:2056", or the CRS name; and which path transforms it, for logs and reports.
   const std::string& sourceName() const;
   std::string pathDescription() const;
+  // Whether the source is WGS84 longitude and latitude itself (transform copies x and y).
+  bool isWgs84LonLat() const;
 
  private:
   struct Impl;

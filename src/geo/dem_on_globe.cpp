@@ -4,7 +4,12 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include <GeographicLib/Geocentric.hpp>
+#include <GeographicLib/Math.hpp>
+
 #include <algorithm>
+#include <atomic>
+#include <cstring>
 #include <cmath>
 #include <numbers>
 
@@ -50,12 +55,30 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
   }
 
   const std::size_t pixels = dem.pixelCount();
-  for (auto* v : {&x_, &y_, &z_, &up_x_, &up_y_}) v->assign(pixels + kDemOnGlobePadding, 0.0);
-  up_z_.assign(pixels + kDemOnGlobePadding, 1.0);
+  width_ = static_cast<std::size_t>(dem.width);
   pole_rows_.assign(static_cast<std::size_t>(dem.height), 0);
   if (progress) progress->beginStage("placing the DEM's pixels on the globe", static_cast<std::uint64_t>(dem.height));
-  constexpr std::int32_t kRows = 16;
-  tbb::parallel_for(tbb::blocked_range<std::int32_t>(0, dem.height, kRows), [&](const tbb::blocked_range<std::int32_t>& rows) {
+  // A WGS84 longitude and latitude DEM: the factors per column from the first row (a column's
+  // longitude is the same on every row; the comparison below holds each pixel to it).
+  if (transforms_->local().isWgs84LonLat() && dem.width > 0 && dem.height > 0) {
+    Factors& factors = factors_.emplace();
+    std::vector<CrsPoint> first_row(width_);
+    std::vector<GeodeticPoint> lon_lat(width_);
+    for (std::int32_t col = 0; col < dem.width; ++col) first_row[static_cast<std::size_t>(col)] = dem.pixelCentre(col, 0);
+    transforms_->local().transform(first_row, lon_lat);
+    for (auto* v : {&factors.slam, &factors.clam, &factors.cos_lon, &factors.sin_lon}) v->assign(width_ + kDemOnGlobePadding, 0.0);
+    constexpr double kDegToRad = std::numbers::pi / 180.0;
+    for (std::size_t col = 0; col < width_; ++col) {
+      GeographicLib::Math::sincosd(lon_lat[col].lon_deg, factors.slam[col], factors.clam[col]);
+      const double lon = lon_lat[col].lon_deg * kDegToRad;
+      factors.cos_lon[col] = std::cos(lon);
+      factors.sin_lon[col] = std::sin(lon);
+    }
+    factors.rows.resize(static_cast<std::size_t>(dem.height));
+    factors.height.assign(pixels + kDemOnGlobePadding, 0.0);
+  }
+  std::atomic<bool> factors_hold = true;
+  const auto placeRows = [&](const tbb::blocked_range<std::int32_t>& rows, bool with_factors) {
     const std::size_t first = dem.index(0, rows.begin());
     const std::size_t count = static_cast<std::size_t>(rows.size()) * static_cast<std::size_t>(dem.width);
     std::vector<GridPoint> grid(count);
@@ -69,14 +92,39 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
     }
     std::vector<EcefPoint> ecef(count);
     placePixels(grid, geodetic, ecef);
-    for (std::size_t i = 0; i < count; ++i) {
-      x_[first + i] = ecef[i].x;
-      y_[first + i] = ecef[i].y;
-      z_[first + i] = ecef[i].z;
-      const UnitVector up = ellipsoidNormal(geodetic[i]);
-      up_x_[first + i] = up[0];
-      up_y_[first + i] = up[1];
-      up_z_[first + i] = up[2];
+    if (with_factors) {
+      const GeographicLib::Geocentric& earth = GeographicLib::Geocentric::WGS84();
+      const double f = earth.Flattening(), e2 = f * (2 - f), e2m = (1 - f) * (1 - f);
+      constexpr double kDegToRad = std::numbers::pi / 180.0;
+      for (std::int32_t row = rows.begin(); row < rows.end() && factors_hold; ++row) {
+        RowFactors& r = factors_->rows[static_cast<std::size_t>(row)];
+        const double lat_deg = geodetic[dem.index(0, row) - first].lat_deg;
+        GeographicLib::Math::sincosd(GeographicLib::Math::LatFix(lat_deg), r.sphi, r.cphi);
+        r.n = earth.EquatorialRadius() / std::sqrt(1 - e2 * (r.sphi * r.sphi));
+        r.e2m_n = e2m * r.n;
+        r.cos_lat = std::cos(lat_deg * kDegToRad);
+        r.sin_lat = std::sin(lat_deg * kDegToRad);
+        for (std::int32_t col = 0; col < dem.width; ++col) {
+          const std::size_t i = dem.index(col, row) - first;
+          factors_->height[first + i] = geodetic[i].height_m;
+          const EcefPoint p = point(col, row);
+          const UnitVector u = up(col, row), normal = ellipsoidNormal(geodetic[i]);
+          if (std::memcmp(&p, &ecef[i], sizeof p) != 0 || std::memcmp(&u, &normal, sizeof u) != 0) {
+            factors_hold = false;
+            break;
+          }
+        }
+      }
+    } else {
+      for (std::size_t i = 0; i < count; ++i) {
+        x_[first + i] = ecef[i].x;
+        y_[first + i] = ecef[i].y;
+        z_[first + i] = ecef[i].z;
+        const UnitVector up = ellipsoidNormal(geodetic[i]);
+        up_x_[first + i] = up[0];
+        up_y_[first + i] = up[1];
+        up_z_[first + i] = up[2];
+      }
     }
     constexpr double kPoleDeg = 90 - 1e-9;
     for (std::int32_t row = rows.begin(); row < rows.end(); ++row) {
@@ -86,12 +134,24 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
       }
       pole_rows_[static_cast<std::size_t>(row)] = at_pole ? 1 : 0;
     }
-  });
+  };
+  constexpr std::int32_t kRows = 16;
+  if (factors_) {
+    tbb::parallel_for(tbb::blocked_range<std::int32_t>(0, dem.height, kRows),
+                      [&](const tbb::blocked_range<std::int32_t>& rows) { placeRows(rows, true); });
+    if (!factors_hold) factors_.reset();  // a pixel the factors do not give bit for bit: store them all
+  }
+  if (!factors_) {
+    for (auto* v : {&x_, &y_, &z_, &up_x_, &up_y_}) v->assign(pixels + kDemOnGlobePadding, 0.0);
+    up_z_.assign(pixels + kDemOnGlobePadding, 1.0);
+    tbb::parallel_for(tbb::blocked_range<std::int32_t>(0, dem.height, kRows),
+                      [&](const tbb::blocked_range<std::int32_t>& rows) { placeRows(rows, false); });
+  }
   has_pole_rows_ = std::find(pole_rows_.begin(), pole_rows_.end(), 1) != pole_rows_.end();
   // Spacing of neighbouring points, without their heights (the part along the vertical).
-  const auto horizontal = [&](std::size_t i, std::size_t j) {
-    const EcefPoint p = point(i), q = point(j);
-    const UnitVector u = up(i);
+  const auto horizontal = [&](std::int32_t col, std::int32_t row, std::int32_t next_col, std::int32_t next_row) {
+    const EcefPoint p = point(col, row), q = point(next_col, next_row);
+    const UnitVector u = up(col, row);
     const double d[3] = {q.x - p.x, q.y - p.y, q.z - p.z};
     const double along = d[0] * u[0] + d[1] * u[1] + d[2] * u[2];
     return std::sqrt(std::max(0.0, d[0] * d[0] + d[1] * d[1] + d[2] * d[2] - along * along));
@@ -102,9 +162,9 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
   tbb::parallel_for(std::int32_t{0}, dem.height, [&](std::int32_t row) {
     double columns = dem.width > 1 ? 1e300 : 0.0, rows = row + 1 < dem.height ? 1e300 : 0.0, sin_latitude = 0;
     for (std::int32_t col = 0; col < dem.width; ++col) {
-      sin_latitude = std::max(sin_latitude, std::fabs(up_z_[dem.index(col, row)]));
-      if (col + 1 < dem.width) columns = std::min(columns, horizontal(dem.index(col, row), dem.index(col + 1, row)));
-      if (row + 1 < dem.height) rows = std::min(rows, horizontal(dem.index(col, row), dem.index(col, row + 1)));
+      sin_latitude = std::max(sin_latitude, std::fabs(sinLatitude(col, row)));
+      if (col + 1 < dem.width) columns = std::min(columns, horizontal(col, row, col + 1, row));
+      if (row + 1 < dem.height) rows = std::min(rows, horizontal(col, row, col, row + 1));
     }
     column_spacing_m_[static_cast<std::size_t>(row)] = pole_rows_[static_cast<std::size_t>(row)] ? 0.0 : columns;
     row_spacing_m_[static_cast<std::size_t>(row)] = rows;
@@ -112,7 +172,7 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
   });
   if (dem.width > 2) {
     const std::int32_t middle = dem.height / 2;
-    const double seam = horizontal(dem.index(dem.width - 1, middle), dem.index(0, middle));
+    const double seam = horizontal(dem.width - 1, middle, 0, middle);
     wraps_longitude_ = seam < 1.5 * column_spacing_m_[static_cast<std::size_t>(middle)];
   }
   if (progress) {

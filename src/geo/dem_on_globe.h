@@ -12,14 +12,21 @@
 // Every pixel is placed once, in parallel (one CRS transformation per thread). A nodata pixel
 // is placed at the DEM's mean valid height, so that its vertical exists too (the TIN's
 // virtual vertices sit there). Memory: 48 bytes per pixel (doubles: a vertical rounded to
-// float would tilt by 6e-8 rad, and move a steep triangle's error by a ten-millionth). Placing is deterministic: the same
-// DEM and geoid give the same points bit for bit, in the build and in `terratiles check`.
+// float would tilt by 6e-8 rad, and move a steep triangle's error by a ten-millionth), or 8
+// for a DEM in WGS84 longitude and latitude (SRTM, ETOPO5): there a pixel's latitude is its
+// row's and its longitude its column's, so its point and vertical are products of factors
+// per row and per column and its ellipsoidal height (DemOnGlobe::Factors), the same
+// operations GeographicLib's Geocentric::Forward and ellipsoidNormal do. The constructor
+// compares every pixel's product with the placed point bit for bit and keeps the 48 bytes
+// when one differs. Placing is deterministic: the same DEM and geoid give the same points
+// bit for bit, in the build and in `terratiles check`.
 
 #include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -52,9 +59,55 @@ class DemOnGlobe {
   // The height a nodata pixel (and a TIN's virtual vertex) is placed at: the mean valid height.
   double nodataHeight() const { return nodata_height_m_; }
 
-  // Per pixel (DemGrid::index): the DEM point in ECEF and the unit vertical there.
-  EcefPoint point(std::size_t pixel) const { return {x_[pixel], y_[pixel], z_[pixel]}; }
-  UnitVector up(std::size_t pixel) const { return {up_x_[pixel], up_y_[pixel], up_z_[pixel]}; }
+  // A WGS84 longitude and latitude DEM's pixels (see above): pixel (col, row) with
+  // ellipsoidal height h lies at {X * clam[col], X * slam[col], (e2m_n + h) * sphi} with
+  // X = (n + h) * cphi (the row's factors), and its vertical is {cos_lat * cos_lon[col],
+  // cos_lat * sin_lon[col], sin_lat}. The column arrays and `height` hold
+  // kDemOnGlobePadding entries more (zeros), for vectorised scans.
+  struct RowFactors {
+    double n, e2m_n, sphi, cphi;  // Geocentric::Forward's prime vertical radius and sincosd
+    double cos_lat, sin_lat;      // ellipsoidNormal's
+  };
+  struct Factors {
+    std::vector<RowFactors> rows;
+    std::vector<double> slam, clam, cos_lon, sin_lon;  // per column
+    std::vector<double> height;                        // per pixel: ellipsoidal, metres
+  };
+  // The factors, or nullptr when the points and verticals are stored (pointX() ... upZ()).
+  const Factors* factors() const { return factors_ ? &*factors_ : nullptr; }
+
+  // Per pixel: the DEM point in ECEF and the unit vertical there.
+  EcefPoint point(std::int32_t col, std::int32_t row) const {
+    const std::size_t pixel = dem_.index(col, row);
+    if (!factors_) return {x_[pixel], y_[pixel], z_[pixel]};
+    const RowFactors& r = factors_->rows[static_cast<std::size_t>(row)];
+    const double h = factors_->height[pixel];
+    const double across = (r.n + h) * r.cphi;
+    return {across * factors_->clam[static_cast<std::size_t>(col)], across * factors_->slam[static_cast<std::size_t>(col)],
+            (r.e2m_n + h) * r.sphi};
+  }
+  UnitVector up(std::int32_t col, std::int32_t row) const {
+    if (!factors_) {
+      const std::size_t pixel = dem_.index(col, row);
+      return {up_x_[pixel], up_y_[pixel], up_z_[pixel]};
+    }
+    const RowFactors& r = factors_->rows[static_cast<std::size_t>(row)];
+    return {r.cos_lat * factors_->cos_lon[static_cast<std::size_t>(col)],
+            r.cos_lat * factors_->sin_lon[static_cast<std::size_t>(col)], r.sin_lat};
+  }
+  // The same by pixel index (DemGrid::index).
+  EcefPoint point(std::size_t pixel) const {
+    if (!factors_) return {x_[pixel], y_[pixel], z_[pixel]};
+    return point(static_cast<std::int32_t>(pixel % width_), static_cast<std::int32_t>(pixel / width_));
+  }
+  UnitVector up(std::size_t pixel) const {
+    if (!factors_) return {up_x_[pixel], up_y_[pixel], up_z_[pixel]};
+    return up(static_cast<std::int32_t>(pixel % width_), static_cast<std::int32_t>(pixel / width_));
+  }
+  // The sine of the latitude of a pixel's vertical (up()[2]).
+  double sinLatitude(std::int32_t col, std::int32_t row) const {
+    return factors_ ? factors_->rows[static_cast<std::size_t>(row)].sin_lat : up_z_[dem_.index(col, row)];
+  }
   // Whether row `row` lies at a pole (a geographic DEM's first or last row at +-90 degrees):
   // all its pixels are one point, so the grid cannot say which triangle is drawn above them;
   // the TIN and the simplifier measure them in the grid, the tiles and `terratiles check` as
@@ -72,7 +125,8 @@ class DemOnGlobe {
   double maxSinLatitude(std::int32_t row) const { return max_sin_latitude_[static_cast<std::size_t>(row)]; }
   // Whether the DEM spans the whole circle of longitude (its last column is next to its first).
   bool wrapsLongitude() const { return wraps_longitude_; }
-  // The same as arrays (structure of arrays, for vectorised scans).
+  // Without factors(): the same as arrays (structure of arrays, for vectorised scans;
+  // pixelLanes in dem_on_globe_lanes.h reads either form).
   const double* pointX() const { return x_.data(); }
   const double* pointY() const { return y_.data(); }
   const double* pointZ() const { return z_.data(); }
@@ -97,7 +151,9 @@ class DemOnGlobe {
   double nodata_height_m_ = 0;
   double centre_undulation_m_ = 0;
   std::unique_ptr<Transforms> transforms_;
-  std::vector<double> x_, y_, z_;
+  std::size_t width_ = 0;
+  std::optional<Factors> factors_;
+  std::vector<double> x_, y_, z_;  // without factors_
   std::vector<double> up_x_, up_y_, up_z_;
   std::vector<std::uint8_t> pole_rows_;
   std::vector<double> column_spacing_m_, row_spacing_m_, max_sin_latitude_;

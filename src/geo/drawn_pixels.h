@@ -57,21 +57,16 @@ void forEachPixelMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle,
   if (triangle.degenerate()) return;
   const DemGrid& dem = globe.dem();
   const std::int32_t first_row = std::max(0, box.row0), last_row = std::min(dem.height - 1, box.row1);
-  const double *x = globe.pointX(), *y = globe.pointY(), *z = globe.pointZ();
-  const double *up_x = globe.upX(), *up_y = globe.upY(), *up_z = globe.upZ();
-  const auto test = [&](std::size_t pixel) {
+  const auto test = [&](std::int32_t col, std::int32_t row) {
     double offset_m = 0;
-    if (triangle.meets(EcefPoint{x[pixel], y[pixel], z[pixel]}, UnitVector{up_x[pixel], up_y[pixel], up_z[pixel]},
-                       &offset_m)) {
-      visit(pixel, offset_m);
-    }
+    if (triangle.meets(globe.point(col, row), globe.up(col, row), &offset_m)) visit(dem.index(col, row), offset_m);
   };
   if (globe.wrapsLongitude()) {
     for (std::int32_t row = first_row; row <= last_row; ++row) {
       for (std::int64_t c = box.col0; c <= box.col1; ++c) {
         std::int64_t col = c % dem.width;
         if (col < 0) col += dem.width;
-        test(dem.index(static_cast<std::int32_t>(col), row));
+        test(static_cast<std::int32_t>(col), row);
       }
     }
     return;
@@ -80,8 +75,7 @@ void forEachPixelMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle,
   const std::int64_t first_col = std::max<std::int64_t>(0, box.col0);
   const std::int64_t last_col = std::min<std::int64_t>(dem.width - 1, box.col1);
   for (std::int32_t row = first_row; row <= last_row; ++row) {
-    const std::size_t row_start = dem.index(0, row);
-    for (std::int64_t col = first_col; col <= last_col; ++col) test(row_start + static_cast<std::size_t>(col));
+    for (std::int64_t col = first_col; col <= last_col; ++col) test(static_cast<std::int32_t>(col), row);
   }
 }
 

@@ -14,6 +14,7 @@
 #include <immintrin.h>
 #endif
 
+#include "src/geo/dem_on_globe_lanes.h"
 #include "src/tin/measure_tin.h"
 
 namespace terratiles {
@@ -43,13 +44,11 @@ __attribute__((target("avx2"))) inline __m256d sub(__m256d p, __m256d q) { retur
 // scalar code computes it operation for operation (no fused multiply-add: AVX2 alone has
 // none), so a lane's verdict and offset are the scalar ones bit for bit. Returns the lanes
 // that meet (bit k: lane k); offsets[k] is lane k's offset where it meets.
-__attribute__((target("avx2"))) unsigned meets4(const DemOnGlobe& globe, const DrawnTriangle& tri, std::size_t i,
-                                                double offsets[4]) {
+__attribute__((target("avx2"))) unsigned meets4(const DemOnGlobe& globe, const DrawnTriangle& tri, std::int32_t col,
+                                                std::int32_t row, std::size_t i, double offsets[4]) {
   constexpr double kTolerance = 1e-9;  // DrawnTriangle::meets's
-  const __m256d x = _mm256_loadu_pd(globe.pointX() + i), y = _mm256_loadu_pd(globe.pointY() + i),
-                z = _mm256_loadu_pd(globe.pointZ() + i);
-  const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
-                uz = _mm256_loadu_pd(globe.upZ() + i);
+  const PixelLanes pixels = pixelLanes(globe, col, row, i);
+  const __m256d x = pixels.x, y = pixels.y, z = pixels.z, ux = pixels.ux, uy = pixels.uy, uz = pixels.uz;
   const __m256d ab0 = _mm256_set1_pd(tri.ab[0]), ab1 = _mm256_set1_pd(tri.ab[1]), ab2 = _mm256_set1_pd(tri.ab[2]);
   const __m256d ac0 = _mm256_set1_pd(tri.ac[0]), ac1 = _mm256_set1_pd(tri.ac[1]), ac2 = _mm256_set1_pd(tri.ac[2]);
   const __m256d ax = _mm256_set1_pd(tri.a.x), ay = _mm256_set1_pd(tri.a.y), az = _mm256_set1_pd(tri.a.z);
@@ -122,18 +121,20 @@ __attribute__((target("avx2"))) unsigned covered4(const GridPoint& a, const Grid
 }
 #endif
 
-// Pixels [first, last] (indices, one row) meeting the triangle, appended in order.
-void rowMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, std::size_t first, std::size_t last,
-                std::vector<PixelOffset>& hits) {
+// Pixels [first_col, last_col] of one row meeting the triangle, appended in order.
+void rowMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, std::int32_t row, std::int32_t first_col,
+                std::int32_t last_col, std::vector<PixelOffset>& hits) {
+  const std::size_t row_start = globe.dem().index(0, row);
 #if defined(__x86_64__)
   if (kHasAvx2) {
-    // The last step reads up to three pixels past `last` (never kept): past the raster's end
-    // on its last row, DemOnGlobe's arrays hold kDemOnGlobePadding pixels more for that.
+    // The last step reads up to three pixels past `last_col` (never kept): past the raster's
+    // end on its last row, DemOnGlobe's arrays hold kDemOnGlobePadding pixels more for that.
     static_assert(kDemOnGlobePadding >= 3);
     double offsets[4];
-    for (std::size_t i = first; i <= last; i += 4) {
-      unsigned met = meets4(globe, triangle, i, offsets);
-      if (last - i < 3) met &= (1u << (last - i + 1)) - 1;
+    for (std::int32_t col = first_col; col <= last_col; col += 4) {
+      const std::size_t i = row_start + static_cast<std::size_t>(col);
+      unsigned met = meets4(globe, triangle, col, row, i, offsets);
+      if (last_col - col < 3) met &= (1u << (last_col - col + 1)) - 1;
       for (; met != 0; met &= met - 1) {
         const int lane = std::countr_zero(met);
         hits.push_back({i + static_cast<std::size_t>(lane), offsets[lane]});
@@ -142,13 +143,10 @@ void rowMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, std::siz
     return;
   }
 #endif
-  const double *x = globe.pointX(), *y = globe.pointY(), *z = globe.pointZ();
-  const double *up_x = globe.upX(), *up_y = globe.upY(), *up_z = globe.upZ();
-  for (std::size_t pixel = first; pixel <= last; ++pixel) {
+  for (std::int32_t col = first_col; col <= last_col; ++col) {
     double offset_m = 0;
-    if (triangle.meets(EcefPoint{x[pixel], y[pixel], z[pixel]}, UnitVector{up_x[pixel], up_y[pixel], up_z[pixel]},
-                       &offset_m)) {
-      hits.push_back({pixel, offset_m});
+    if (triangle.meets(globe.point(col, row), globe.up(col, row), &offset_m)) {
+      hits.push_back({row_start + static_cast<std::size_t>(col), offset_m});
     }
   }
 }
@@ -191,15 +189,13 @@ void pixelsMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const
   const std::int32_t first_row = std::max(0, box.row0), last_row = std::min(dem.height - 1, box.row1);
   if (box.col1 < box.col0) return;
   for (std::int32_t row = first_row; row <= last_row; ++row) {
-    const std::size_t row_start = dem.index(0, row);
     if (globe.wrapsLongitude()) {
       // Columns modulo the width, in the order c = col0 .. col1: runs split at the seam.
       for (std::int64_t c = box.col0; c <= box.col1;) {
         std::int64_t col = c % dem.width;
         if (col < 0) col += dem.width;
         const std::int64_t run = std::min<std::int64_t>(box.col1 - c, dem.width - 1 - col);
-        rowMeeting(globe, triangle, row_start + static_cast<std::size_t>(col),
-                   row_start + static_cast<std::size_t>(col + run), hits);
+        rowMeeting(globe, triangle, row, static_cast<std::int32_t>(col), static_cast<std::int32_t>(col + run), hits);
         c += run + 1;
       }
       continue;
@@ -207,8 +203,7 @@ void pixelsMeeting(const DemOnGlobe& globe, const DrawnTriangle& triangle, const
     const std::int64_t first_col = std::max<std::int64_t>(0, box.col0);
     const std::int64_t last_col = std::min<std::int64_t>(dem.width - 1, box.col1);
     if (first_col > last_col) continue;
-    rowMeeting(globe, triangle, row_start + static_cast<std::size_t>(first_col),
-               row_start + static_cast<std::size_t>(last_col), hits);
+    rowMeeting(globe, triangle, row, static_cast<std::int32_t>(first_col), static_cast<std::int32_t>(last_col), hits);
   }
 }
 
@@ -222,7 +217,6 @@ PixelBoxes::PixelBoxes(const DemOnGlobe& globe) : globe_(globe) {
     double sin_low = kInfinity, sin_high = 0;
     double row_low = kInfinity, row_high = -kInfinity, column_low = kInfinity, column_high = -kInfinity;
     bool pole = false;
-    const double* up_z = globe.upZ();
     for (std::int32_t row = b * kBandRows; row < std::min(dem.height, (b + 1) * kBandRows); ++row) {
       pole = pole || globe.poleRow(row);
       if (row < dem.height - 1) {
@@ -231,9 +225,8 @@ PixelBoxes::PixelBoxes(const DemOnGlobe& globe) : globe_(globe) {
       }
       column_low = std::min(column_low, globe.columnSpacing(row));
       column_high = std::max(column_high, globe.columnSpacing(row));
-      const std::size_t start = dem.index(0, row);
       for (std::int32_t col = 0; col < dem.width; ++col) {
-        const double s = std::fabs(up_z[start + col]);
+        const double s = std::fabs(globe.sinLatitude(col, row));
         sin_low = std::min(sin_low, s);
         sin_high = std::max(sin_high, s);
       }

@@ -14,6 +14,7 @@
 
 #include "src/base/error.h"
 #include "src/geo/dem_on_globe.h"
+#include "src/geo/dem_on_globe_lanes.h"
 #include "src/geo/drawn_pixels.h"
 #include "src/geo/drawn_triangle.h"
 
@@ -178,19 +179,17 @@ constexpr double kWallError = 1e9;
 // The error of a drawn triangle at pixel i: |DrawnTriangle::offset| of the pixel's DEM point,
 // computed with the same operations in the same order (so the scalar and vector forms agree
 // bit for bit, and with measureTin), capped at kWallError (also where the offset is NaN).
-inline double exactErrorAt(const DemOnGlobe& globe, const DrawnTriangle& drawn, std::size_t i) {
-  const double error = std::fabs(drawn.offset(globe.point(i), globe.up(i)));
+inline double exactErrorAt(const DemOnGlobe& globe, const DrawnTriangle& drawn, std::int32_t col, std::int32_t row) {
+  const double error = std::fabs(drawn.offset(globe.point(col, row), globe.up(col, row)));
   return error < kWallError ? error : kWallError;
 }
 
 #if defined(__x86_64__)
 // Four pixels' errors from index i on (lane k is pixel i + k).
 __attribute__((target("avx2"))) inline __m256d exactErrors4(const DemOnGlobe& globe, const DrawnTriangle& drawn,
-                                                            std::size_t i) {
-  const __m256d px = _mm256_loadu_pd(globe.pointX() + i), py = _mm256_loadu_pd(globe.pointY() + i),
-                pz = _mm256_loadu_pd(globe.pointZ() + i);
-  const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
-                uz = _mm256_loadu_pd(globe.upZ() + i);
+                                                            std::int32_t col, std::int32_t row, std::size_t i) {
+  const PixelLanes pixels = pixelLanes(globe, col, row, i);
+  const __m256d px = pixels.x, py = pixels.y, pz = pixels.z, ux = pixels.ux, uy = pixels.uy, uz = pixels.uz;
   const __m256d nx = _mm256_set1_pd(drawn.normal[0]), ny = _mm256_set1_pd(drawn.normal[1]),
                 nz = _mm256_set1_pd(drawn.normal[2]);
   const __m256d along =
@@ -215,15 +214,17 @@ __attribute__((target("avx2"))) inline __m256d exactErrors4(const DemOnGlobe& gl
 
 // The largest exact error over pixels [x0, x1] of the row starting at pixel index row_start.
 __attribute__((target("avx2"))) double rowMaxExactAvx2(const DemOnGlobe& globe, const DrawnTriangle& drawn,
-                                                       std::size_t row_start, std::int64_t x0, std::int64_t x1) {
+                                                       std::int32_t y, std::int64_t x0, std::int64_t x1) {
+  const std::size_t row_start = globe.dem().index(0, y);
   std::int64_t x = x0;
   __m256d vmax = _mm256_setzero_pd();
   for (; x + 3 <= x1; x += 4) {
-    vmax = _mm256_max_pd(vmax, exactErrors4(globe, drawn, row_start + static_cast<std::size_t>(x)));
+    vmax = _mm256_max_pd(vmax, exactErrors4(globe, drawn, static_cast<std::int32_t>(x), y,
+                                            row_start + static_cast<std::size_t>(x)));
   }
   const __m128d half = _mm_max_pd(_mm256_castpd256_pd128(vmax), _mm256_extractf128_pd(vmax, 1));
   double row_max = std::max(_mm_cvtsd_f64(half), _mm_cvtsd_f64(_mm_unpackhi_pd(half, half)));
-  for (; x <= x1; ++x) row_max = std::max(row_max, exactErrorAt(globe, drawn, row_start + static_cast<std::size_t>(x)));
+  for (; x <= x1; ++x) row_max = std::max(row_max, exactErrorAt(globe, drawn, static_cast<std::int32_t>(x), y));
   return row_max;
 }
 
@@ -253,7 +254,7 @@ __attribute__((target("avx2"))) bool boxWorstPixelExactAvx2(const DemOnGlobe& gl
     const __m256d row_position = _mm256_set1_pd(static_cast<double>(row));
     __m256d vx = first_x, w0 = row_start[0], w1 = row_start[1], w2 = row_start[2];
     for (std::int32_t x = x_first; x <= x_last; x += 4) {
-      const __m256d error = exactErrors4(globe, drawn, row + static_cast<std::size_t>(x));
+      const __m256d error = exactErrors4(globe, drawn, x, y, row + static_cast<std::size_t>(x));
       const __m256d inside = _mm256_and_pd(
           _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(w0, zero, _CMP_GE_OQ), _mm256_cmp_pd(w1, zero, _CMP_GE_OQ)),
                         _mm256_cmp_pd(w2, zero, _CMP_GE_OQ)),
@@ -1157,7 +1158,7 @@ class GreedyInsertion {
     return static_cast<std::size_t>(p.y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(p.x);
   }
 
-  double exactError(const DrawnTriangle& drawn, Pixel p) const { return exactErrorAt(*globe_, drawn, pixelIndex(p)); }
+  double exactError(const DrawnTriangle& drawn, Pixel p) const { return exactErrorAt(*globe_, drawn, p.x, p.y); }
 
   // Calls visit(x, y) for every pixel inside triangle (a, b, c), row by row, left to right,
   // within the box [x_first, x_last] x [y_first, y_last].
@@ -1220,11 +1221,10 @@ class GreedyInsertion {
       for (std::int32_t y = y_first; y <= y_last; ++y) {
         std::int64_t x0 = x_first, x1 = x_last;
         if (!rowSpan(y, alpha, beta_step, beta_at_0, inverse_alpha, &x0, &x1)) continue;
-        const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(width_);
-        const double row_max = rowMaxExactAvx2(*globe_, drawn, row, x0, x1);
+        const double row_max = rowMaxExactAvx2(*globe_, drawn, y, x0, x1);
         if (row_max > *best_error) {
           for (std::int64_t x = x0; x <= x1; ++x) {
-            if (exactErrorAt(*globe_, drawn, row + static_cast<std::size_t>(x)) == row_max) {
+            if (exactErrorAt(*globe_, drawn, static_cast<std::int32_t>(x), y) == row_max) {
               *best = {static_cast<std::int32_t>(x), y};
               *best_error = row_max;
               break;
@@ -1479,8 +1479,8 @@ std::vector<Pixel> simplifyRun(const DemGrid& dem, const DemOnGlobe* globe, Pixe
       const Pixel v{std::min(dem.width - 1, p.x + ox), std::min(dem.height - 1, p.y + oy)};
       const float hu = dem.heightAt(u.x, u.y), hv = dem.heightAt(v.x, v.y);
       if (std::isnan(hu) || std::isnan(hv) || (u.x == v.x && u.y == v.y)) continue;
-      const EcefPoint& pu = globe->point(dem.index(u.x, u.y));
-      const EcefPoint& pv = globe->point(dem.index(v.x, v.y));
+      const EcefPoint& pu = globe->point(u.x, u.y);
+      const EcefPoint& pv = globe->point(v.x, v.y);
       const double distance = std::hypot(pv.x - pu.x, pv.y - pu.y, pv.z - pu.z);
       if (distance > 0) worst = std::max(worst, std::fabs(static_cast<double>(hv) - hu) / distance);
     }

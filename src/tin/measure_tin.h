@@ -116,7 +116,7 @@ inline bool coveredInsideOnGlobe(const DemOnGlobe& globe, const GridPoint& a, co
     const double wa = ea * sign / area2, wb = eb * sign / area2;
     *offset_m = wa * a.height_m + wb * b.height_m + (1.0 - wa - wb) * c.height_m - dem.heights_m[pixel];
   } else {
-    *offset_m = drawn.offset(globe.point(pixel), globe.up(pixel));
+    *offset_m = drawn.offset(globe.point(col, row), globe.up(col, row));
   }
   return true;
 }
@@ -169,7 +169,7 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
           const double wa = ea * sign / area2, wb = eb * sign / area2;
           offset_m = wa * a.height_m + wb * b.height_m + (1.0 - wa - wb) * c.height_m - dem.heights_m[pixel];
         } else {
-          offset_m = drawn.offset(globe.point(pixel), globe.up(pixel));
+          offset_m = drawn.offset(globe.point(col, row), globe.up(col, row));
         }
         if (!visit(pixel, offset_m)) return;
         continue;
@@ -178,7 +178,7 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
       // Outside in the grid: within the margin of every edge, and met as drawn?
       if (ea < reach[0] || eb < reach[1] || ec < reach[2]) continue;
       double offset_m = 0;
-      if (drawn.meets(globe.point(pixel), globe.up(pixel), &offset_m) && !visit(pixel, offset_m)) return;
+      if (drawn.meets(globe.point(col, row), globe.up(col, row), &offset_m) && !visit(pixel, offset_m)) return;
     }
   }
 }
