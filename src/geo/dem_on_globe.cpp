@@ -216,12 +216,34 @@ DemOnGlobe::~DemOnGlobe() = default;
 void DemOnGlobe::place(std::span<const GridPoint> points, std::span<GeodeticPoint> geodetic,
                        std::span<EcefPoint> ecef) const {
   TERRATILES_ASSERT(points.size() == ecef.size() && (geodetic.empty() || geodetic.size() == points.size()));
-  std::vector<GeodeticPoint> scratch;
-  if (geodetic.empty()) {
-    scratch.resize(points.size());
-    geodetic = scratch;
+  if (!geodetic.empty()) {
+    placeOnGlobe(dem_, points, transforms_->local(), geoid_, geodetic, ecef);
+    return;
   }
-  placeOnGlobe(dem_, points, transforms_->local(), geoid_, geodetic, ecef);
+  // A point at a valid pixel's centre with that pixel's height is that pixel's point (the
+  // constructor placed it with placeOnGlobe's steps): every vertex of a TIN but its virtual
+  // ones. The others are placed in batches; all in parallel.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 16384), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<GridPoint> rest;
+    std::vector<std::size_t> rest_index;
+    for (std::size_t i = range.begin(); i < range.end(); ++i) {
+      const GridPoint& g = points[i];
+      if (g.col >= 0 && g.row >= 0 && g.col < dem_.width && g.row < dem_.height) {
+        const auto col = static_cast<std::int32_t>(g.col), row = static_cast<std::int32_t>(g.row);
+        if (col == g.col && row == g.row && static_cast<double>(dem_.heightAt(col, row)) == g.height_m) {
+          ecef[i] = point(col, row);
+          continue;
+        }
+      }
+      rest.push_back(g);
+      rest_index.push_back(i);
+    }
+    if (rest.empty()) return;
+    std::vector<GeodeticPoint> rest_geodetic(rest.size());
+    std::vector<EcefPoint> rest_ecef(rest.size());
+    placeOnGlobe(dem_, rest, transforms_->local(), geoid_, rest_geodetic, rest_ecef);
+    for (std::size_t k = 0; k < rest.size(); ++k) ecef[rest_index[k]] = rest_ecef[k];
+  });
 }
 
 EcefPoint DemOnGlobe::place(const GridPoint& point) const {

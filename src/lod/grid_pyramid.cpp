@@ -105,8 +105,7 @@ GridPyramid buildGridPyramid(const DemGrid& dem, const GridPyramidOptions& optio
         it->second = level.tiles.size();
         level.tiles.push_back({TileKey{zoom, tx, ty}, {}, 0, 0, 0});
       }
-      auto& tri = level.tiles[it->second].triangle_indices;
-      tri.insert(tri.end(), {idx[t], idx[t + 1], idx[t + 2]});
+      level.tiles[it->second].faces.push_back(static_cast<std::uint32_t>(t / 3));
     }
     std::sort(level.tiles.begin(), level.tiles.end(), [](const PyramidTile& l, const PyramidTile& r) {
       return std::tie(l.key.y, l.key.x) < std::tie(r.key.y, r.key.x);

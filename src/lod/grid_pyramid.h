@@ -30,7 +30,13 @@ struct GridPyramidOptions {
 
 struct PyramidTile {
   TileKey key;
-  std::vector<std::uint32_t> triangle_indices;  // into the level's mesh vertices
+  // The tile's triangles: faces of the level's mesh, ascending (the mesh holds their vertices).
+  std::vector<std::uint32_t> faces;
+  std::size_t triangleCount() const { return faces.size(); }
+  // Vertex k (0 .. 2) of the tile's triangle t, in `mesh`, the level's.
+  std::uint32_t corner(const TinMesh& mesh, std::size_t t, std::size_t k) const {
+    return mesh.triangle_indices[3 * std::size_t{faces[t]} + k];
+  }
   double max_error_m = 0;   // max |mesh - DEM| over the valid pixels the tile covers
   double rms_error_m = 0;
   std::size_t measured_pixels = 0;

@@ -113,9 +113,13 @@ double roundUpToMicrometre(double metres) {
   return std::max(rounded, 1e-6);
 }
 
+// A unit normal as the GLB stores it (glTF normals are floats).
+using FloatNormal = std::array<float, 3>;
+
 // Unit normals in ECEF of a level's vertices from the whole level mesh (area-weighted face
 // normals), so shading is continuous across tiles; an unused vertex gets the ellipsoid normal.
-std::vector<EcefPoint> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
+// Summed and normalised in doubles, kept as floats.
+std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
   const std::size_t n = mesh.vertices.size();
   std::vector<EcefPoint> normals(n, EcefPoint{});
   const auto& idx = mesh.triangle_indices;
@@ -145,17 +149,22 @@ std::vector<EcefPoint> levelNormals(const TinMesh& mesh, std::span<const EcefPoi
     nrm.y /= length;
     nrm.z /= length;
   }
-  return normals;
+  std::vector<FloatNormal> kept(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    kept[i] = {static_cast<float>(normals[i].x), static_cast<float>(normals[i].y), static_cast<float>(normals[i].z)};
+  }
+  return kept;
 }
 
 // The largest side of the ECEF box of the tiles' vertices: what their quantisation must span.
 // Tiles in parallel (a maximum: the same for any order).
-double widestTileExtent(const std::vector<PyramidTile>& tiles, std::span<const EcefPoint> ecef) {
+double widestTileExtent(const std::vector<PyramidTile>& tiles, const TinMesh& mesh, std::span<const EcefPoint> ecef) {
   std::vector<double> widest(tiles.size(), 0.0);
   tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
     EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-    for (std::uint32_t v : tiles[i].triangle_indices) {
-      const EcefPoint& p = ecef[v];
+    const PyramidTile& tile = tiles[i];
+    for (std::size_t c = 0; c < 3 * tile.triangleCount(); ++c) {
+      const EcefPoint& p = ecef[tile.corner(mesh, c / 3, c % 3)];
       lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
       hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
     }
@@ -170,7 +179,7 @@ double widestTileExtent(const std::vector<PyramidTile>& tiles, std::span<const E
 // with them left out. Measured, bounded (its region) and encoded from this.
 struct DrawnContent {
   std::vector<EcefPoint> positions;  // snapped ECEF
-  std::vector<EcefPoint> normals;
+  std::vector<FloatNormal> normals;
   std::vector<GridCorner> grid;      // where each vertex sits in the DEM's grid (before snapping)
   std::vector<std::uint32_t> triangle_indices;
 };
@@ -200,15 +209,16 @@ std::uint64_t pointHash(const EcefPoint& p) {
 // whose snapped point equals an earlier one's is welded to it (the first seen keeps its place
 // and the others take it; found by hashing, which gives what a stable sort by point did).
 DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
-                          std::span<const EcefPoint> normals, const DemOnGlobe& globe, ContentScratch& scratch) {
+                          std::span<const FloatNormal> normals, const DemOnGlobe& globe, ContentScratch& scratch) {
   DrawnContent out;
-  const auto& idx = tile.triangle_indices;
+  const std::size_t triangles = tile.triangleCount();
   std::vector<std::uint32_t>& local_of = scratch.local_of;
   if (local_of.size() < mesh.vertices.size()) local_of.resize(mesh.vertices.size(), kNotInTile);
   // The level's vertices in order of first appearance (local_of: their place in it).
   std::vector<std::uint32_t>& seen = scratch.seen;
   seen.clear();
-  for (const std::uint32_t v : idx) {
+  for (std::size_t c = 0; c < 3 * triangles; ++c) {
+    const std::uint32_t v = tile.corner(mesh, c / 3, c % 3);
     if (local_of[v] != kNotInTile) continue;
     local_of[v] = static_cast<std::uint32_t>(seen.size());
     seen.push_back(v);
@@ -245,10 +255,11 @@ DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::spa
                          globe.poleRow(static_cast<std::int32_t>(g.row));
     out.grid.push_back({g.col, g.row, at_pole});
   }
-  out.triangle_indices.reserve(idx.size());
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    const std::uint32_t a = tile_vertex[local_of[idx[t]]], b = tile_vertex[local_of[idx[t + 1]]],
-                        c = tile_vertex[local_of[idx[t + 2]]];
+  out.triangle_indices.reserve(3 * triangles);
+  for (std::size_t t = 0; t < triangles; ++t) {
+    const std::uint32_t a = tile_vertex[local_of[tile.corner(mesh, t, 0)]],
+                        b = tile_vertex[local_of[tile.corner(mesh, t, 1)]],
+                        c = tile_vertex[local_of[tile.corner(mesh, t, 2)]];
     if (a != b && b != c && c != a) out.triangle_indices.insert(out.triangle_indices.end(), {a, b, c});
   }
   for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
@@ -283,10 +294,10 @@ std::vector<std::uint8_t> encodeContent(const DrawnContent& content, const GlbOp
   mesh.normals.reserve(content.positions.size() * 3);
   for (std::size_t v = 0; v < content.positions.size(); ++v) {
     const EcefPoint& p = content.positions[v];
-    const EcefPoint& n = content.normals[v];
+    const FloatNormal& n = content.normals[v];
     mesh.positions.insert(mesh.positions.end(), {static_cast<float>(p.x - origin.x), static_cast<float>(p.z - origin.z),
                                                  static_cast<float>(-(p.y - origin.y))});
-    mesh.normals.insert(mesh.normals.end(), {static_cast<float>(n.x), static_cast<float>(n.z), static_cast<float>(-n.y)});
+    mesh.normals.insert(mesh.normals.end(), {n[0], n[2], -n[1]});
   }
   EncodedGlb encoded = encodeGlb(mesh, glb);
   *position_bits = encoded.position_bits;
@@ -356,14 +367,14 @@ std::vector<std::uint8_t> outlineVertices(const ZoomContent& zoom) {
   tbb::enumerable_thread_specific<Scratch> scratch;
   tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
     Scratch& s = scratch.local();
-    const auto& idx = zoom.tiles[i].triangle_indices;
+    const PyramidTile& tile = zoom.tiles[i];
     std::vector<std::uint32_t>& local_of = s.numbering.local_of;
     std::vector<std::uint32_t>& seen = s.numbering.seen;
     if (local_of.size() < outline.size()) local_of.resize(outline.size(), kNotInTile);
     seen.clear();
-    s.local.resize(idx.size());
-    for (std::size_t k = 0; k < idx.size(); ++k) {
-      const std::uint32_t v = idx[k];
+    s.local.resize(3 * tile.triangleCount());
+    for (std::size_t k = 0; k < s.local.size(); ++k) {
+      const std::uint32_t v = tile.corner(*zoom.mesh, k / 3, k % 3);
       if (local_of[v] == kNotInTile) {
         local_of[v] = static_cast<std::uint32_t>(seen.size());
         seen.push_back(v);
@@ -528,7 +539,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
                                             own_cluster_tiles)) {
         PyramidTile pyramid_tile;
         pyramid_tile.key = tile.key;
-        pyramid_tile.triangle_indices = std::move(tile.triangle_indices);
+        pyramid_tile.faces = std::move(tile.faces);
         content.tiles.push_back(std::move(pyramid_tile));
       }
       finer_cluster_tiles = std::move(own_cluster_tiles);
@@ -555,7 +566,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   if (options.draco_position_bits > 0) {
     const ZoomContent& finest = zooms.back();
     base_step_m =
-        sharedPositionStep(widestTileExtent(finest.tiles, finest.ecef), std::ldexp(1.0, -30), options.draco_position_bits);
+        sharedPositionStep(widestTileExtent(finest.tiles, *finest.mesh, finest.ecef), std::ldexp(1.0, -30), options.draco_position_bits);
   }
   summary.position_step_m = base_step_m;
 
@@ -575,7 +586,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     std::vector<double> widest_m(zoom_count);
     tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
       outline[k] = outlineVertices(zooms[k]);
-      widest_m[k] = widestTileExtent(zooms[k].tiles, zooms[k].ecef);
+      widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, zooms[k].ecef);
     });
     for (std::size_t k = 0; k < zoom_count; ++k) {
       const ZoomContent& zoom = zooms[k];
@@ -610,26 +621,29 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   // pre-sized slots; the files are written in a fixed order.
   std::vector<std::vector<EncodedTile>> written(zoom_count);
   // Per zoom: its vertices snapped to their grids, and their normals (from the whole level).
+  // The snapped points take the place of the zoom's ECEF points, which nothing needs after.
   struct ZoomVertices {
     std::vector<EcefPoint> snapped;
-    std::vector<EcefPoint> normals;
+    std::vector<FloatNormal> normals;
     double largest_step_m = 0;
   };
   const auto zoomVertices = [&](std::size_t k) {
-    const ZoomContent& level = zooms[k];
+    ZoomContent& level = zooms[k];
     ZoomVertices out;
-    out.snapped.resize(level.ecef.size());
+    out.normals = levelNormals(*level.mesh, level.ecef);
+    out.snapped = std::move(level.ecef);
+    level.ecef = {};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.snapped.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                         for (std::size_t v = range.begin(); v < range.end(); ++v) {
                           const double step = vertex_step_m[k][v];
-                          out.snapped[v] = {snapToStep(level.ecef[v].x, step), snapToStep(level.ecef[v].y, step),
-                                            snapToStep(level.ecef[v].z, step)};
+                          EcefPoint& p = out.snapped[v];
+                          p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
                         }
                       });
     out.largest_step_m =
         vertex_step_m[k].empty() ? 0.0 : *std::max_element(vertex_step_m[k].begin(), vertex_step_m[k].end());
-    out.normals = levelNormals(*level.mesh, level.ecef);
+    vertex_step_m[k] = std::vector<double>();
     return out;
   };
   std::vector<GlbOptions> zoom_glb(zoom_count, glb);
@@ -643,8 +657,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
     // drawn surface (where a viewer draws both), measured on that zoom's surface. Two
     // surfaces' memory, taken in turn.
-    std::array<ZoomSurface, 2> surfaces{ZoomSurface(dem.pixelCount()), ZoomSurface(dem.pixelCount())};
     ZoomVertices vertices = zoomVertices(zoom_count - 1), coarser_vertices;
+    std::array<ZoomSurface, 2> surfaces{ZoomSurface(dem.pixelCount()), ZoomSurface(dem.pixelCount())};
     for (std::size_t k = zoom_count; k-- > 0;) {
       if (k > 0) preparing.run([&, k] { coarser_vertices = zoomVertices(k - 1); });
       const ZoomContent& level = zooms[k];
@@ -665,7 +679,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       zoom_summary.tiles = level.tiles.size();
       zoom_summary.vertices = level.mesh->vertices.size();
       zoom_summary.triangles = level.mesh->triangleCount();
-      for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangle_indices.size() / 3;
+      for (const PyramidTile& tile : level.tiles) zoom_summary.tile_triangles += tile.triangleCount();
 
       // Every tile on its own: its drawn content, measured, bounded and encoded; the largest
       // first.
@@ -674,7 +688,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       std::vector<std::size_t> order(tiles.size());
       for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
       std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
-        return level.tiles[i].triangle_indices.size() > level.tiles[j].triangle_indices.size();
+        return level.tiles[i].triangleCount() > level.tiles[j].triangleCount();
       });
       forEachLargestFirst(order, [&](std::size_t i) {
         const DrawnContent content =

@@ -481,7 +481,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
     targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
     for (const TileKey& key : targets) {
       auto& list = faces_of_tile[{key.y, key.x}];
-      list.insert(list.end(), {idx[3 * f], idx[3 * f + 1], idx[3 * f + 2]});
+      list.push_back(static_cast<std::uint32_t>(f));
     }
   }
   std::vector<TileFaces> tiles;

@@ -129,7 +129,7 @@ ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t t
 
 struct TileFaces {
   TileKey key;
-  std::vector<std::uint32_t> triangle_indices;  // into the level's mesh vertices
+  std::vector<std::uint32_t> faces;  // of the level's mesh, ascending
 };
 
 // Joins the clusters of `partition` (of `mesh`, a level shown at zoom + 1) that cross

@@ -32,7 +32,7 @@ TEST_SUITE("lod") {
       std::size_t triangles = 0;
       std::set<std::pair<int, int>> keys;
       for (const PyramidTile& tile : level.tiles) {
-        triangles += tile.triangle_indices.size() / 3;
+        triangles += tile.faces.size();
         CHECK(tile.key.zoom == static_cast<int>(z));
         CHECK(keys.insert({tile.key.x, tile.key.y}).second);
         // Every tile of zoom z > 0 has a parent at zoom z - 1.
@@ -42,7 +42,7 @@ TEST_SUITE("lod") {
           for (const PyramidTile& p : pyramid.levels[z - 1].tiles) found |= p.key == parent;
           CHECK(found);
         }
-        CHECK(tile.triangle_indices.size() / 3 <= 2u * 8 * 8);
+        CHECK(tile.faces.size() <= 2u * 8 * 8);
       }
       // Tiles partition the level: each triangle is in exactly one tile.
       CHECK(triangles == level.mesh.triangleCount());

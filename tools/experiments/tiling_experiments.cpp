@@ -45,7 +45,7 @@ Redundancy redundancyOf(const TileFrame& frame, const std::vector<Level>& levels
     const auto zoom = max_zoom - static_cast<std::int32_t>(l);
     double sum = 0;
     for (const TileFaces& tile : assignClusters(frame, levels[l], zoom, assignment, finer, own)) {
-      sum += static_cast<double>(tile.triangle_indices.size() / 3);
+      sum += static_cast<double>(tile.faces.size());
     }
     finer = std::move(own);
     const auto triangles = static_cast<double>(levels[l].mesh.triangleCount());
