@@ -532,9 +532,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.mesh = &levels[l].mesh;
       content.ecef = std::move(levels[l].vertex_ecef);
       if (l + 1 < levels.size()) content.index_in_coarser = &levels[l].index_in_coarser;
-      content.map_clusters = !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
-                             : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
-                                                                                  : nullptr;
+      FacePartition* map_clusters = !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
+                                    : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
+                                                                                         : nullptr;
       for (TileFaces& tile : assignClusters(*frame, levels[l], zoom, options.assignment, finer_cluster_tiles,
                                             own_cluster_tiles)) {
         PyramidTile pyramid_tile;
@@ -542,6 +542,12 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         pyramid_tile.faces = std::move(tile.faces);
         content.tiles.push_back(std::move(pyramid_tile));
       }
+      // The level's partitions served the assignment; the report's maps draw one of them.
+      if (!options.report) map_clusters = nullptr;
+      for (FacePartition* partition : {&levels[l].partition, &levels[l].inherited_partition}) {
+        if (partition != map_clusters) partition->cluster_of_face = std::vector<std::int32_t>();
+      }
+      content.map_clusters = map_clusters;
       finer_cluster_tiles = std::move(own_cluster_tiles);
       zooms.push_back(std::move(content));
       progress.advance();
@@ -612,6 +618,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       for (double& step : steps) step = std::max(zoom_step_m[k], step);
       if (k > 0) outline[k - 1] = std::vector<std::uint8_t>();  // the chain needs only the last two
     }
+    for (std::size_t l = 0; l < levels.size(); ++l) levels[l].index_in_coarser = std::vector<std::uint32_t>();
   }
 
   double widest_step_m = 0;
