@@ -30,6 +30,7 @@
 #include <span>
 #include <vector>
 
+#include "src/base/error.h"
 #include "src/base/progress.h"
 #include "src/dem/dem_grid.h"
 #include "src/geo/crs_transform.h"
@@ -127,12 +128,12 @@ class DemOnGlobe {
   bool wrapsLongitude() const { return wraps_longitude_; }
   // Without factors(): the same as arrays (structure of arrays, for vectorised scans;
   // pixelLanes in dem_on_globe_lanes.h reads either form).
-  const double* pointX() const { return x_.data(); }
-  const double* pointY() const { return y_.data(); }
-  const double* pointZ() const { return z_.data(); }
-  const double* upX() const { return up_x_.data(); }
-  const double* upY() const { return up_y_.data(); }
-  const double* upZ() const { return up_z_.data(); }
+  const double* pointX() const { return stored(x_); }
+  const double* pointY() const { return stored(y_); }
+  const double* pointZ() const { return stored(z_); }
+  const double* upX() const { return stored(up_x_); }
+  const double* upY() const { return stored(up_y_); }
+  const double* upZ() const { return stored(up_z_); }
 
   // Grid points (col, row, orthometric or ellipsoidal height as the DEM's) on the globe,
   // exactly as placeOnGlobe places them: a point at a pixel centre with that pixel's DEM
@@ -151,6 +152,11 @@ class DemOnGlobe {
   double nodata_height_m_ = 0;
   double centre_undulation_m_ = 0;
   std::unique_ptr<Transforms> transforms_;
+  const double* stored(const std::vector<double>& array) const {
+    TERRATILES_ASSERT(!factors_);  // the factor form has no such arrays: read it with pixelLanes
+    return array.data();
+  }
+
   std::size_t width_ = 0;
   std::optional<Factors> factors_;
   std::vector<double> x_, y_, z_;  // without factors_
