@@ -164,17 +164,7 @@ bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, c
   return exceeds;
 }
 
-bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
-                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
-                          std::size_t* violating_pixel) {
-  bool exceeds = false;
-  forEachCoveredPixelOnGlobe(globe, a, b, c, pa, pb, pc, [&](std::size_t i, double offset_m) {
-    exceeds = !std::isnan(globe.dem().heights_m[i]) && !(std::fabs(offset_m) <= budget_m);
-    if (exceeds && violating_pixel) *violating_pixel = i;
-    return !exceeds;
-  });
-  return exceeds;
-}
+// exceedsBudgetOnGlobe: budget_scan.cpp.
 
 bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                           const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
