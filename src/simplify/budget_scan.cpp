@@ -41,6 +41,8 @@ struct GlobeScan {
   double budget_m;
   double area2, sign, size, eps;  // the doubled signed area in the grid, its sign, size and tolerance
   double reach[3];         // how far outside an edge a stray pixel may lie (edge function units)
+  int min_col, max_col, min_row, max_row;  // the scan's box
+  bool poles;                              // whether the DEM has pole rows
 
   // The three edge functions of the scan at (col, row), signed so that the inside is positive.
   void edges(double col, double row, double e[3]) const {
@@ -79,7 +81,15 @@ struct GlobeScan {
   // widened by two columns, far more than its rounding (the scan tests each column of the
   // span exactly as before). An edge nearly along the rows (slope under 1e-3) does not narrow
   // the span.
-  void span(int row, int min_col, int max_col, int* first, int* last) const {
+  // A box at most kNarrowColumns wide is scanned whole (two steps of four columns cost less
+  // than the bounds).
+  static constexpr int kNarrowColumns = 8;
+  void span(int row, int* first, int* last) const {
+    if (max_col - min_col < kNarrowColumns) {
+      *first = min_col;
+      *last = max_col;
+      return;
+    }
     double lo = min_col, hi = max_col;
     double at[3];
     edges(min_col, row, at);
@@ -102,25 +112,32 @@ struct GlobeScan {
   }
 };
 
+// The first pixel visited beyond the budget, in the scan's order (rows, then columns).
+bool firstBeyond(const GlobeScan& s, std::size_t* pixel) {
+  for (int row = s.min_row; row <= s.max_row; ++row) {
+    const bool pole_row = s.poles && s.globe.poleRow(row);
+    int first, last;
+    s.span(row, &first, &last);
+    for (int col = first; col <= last; ++col) {
+      if (s.pixelBeyond(col, row, pole_row, pixel)) return true;
+    }
+  }
+  return false;
+}
+
 #if defined(__x86_64__)
 const bool kHasAvx2 = __builtin_cpu_supports("avx2");
 
-// GlobeScan::pixelBeyond for a row (not a pole row) four columns at a time, as its scalar code
-// computes it operation for operation (AVX2 has no fused multiply-add; DrawnTriangle::meets
-// as drawn_tiles.cpp's meets4 computes it).
-//
-// The row's first column visited beyond the budget among columns first .. last, or -1. The
-// last four columns may start before the fourth from the row's end (down to the raster's
-// width minus four, so the loads stay inside the raster): a column tested twice, or one
-// outside the span, is not beyond (the span holds every visited column). Needs width >= 4.
-__attribute__((target("avx2"))) int firstBeyondInRow(const GlobeScan& s, int row, int first, int last) {
+// firstBeyond with each row (but a pole row) four columns at a time, as pixelBeyond computes
+// it operation for operation (AVX2 has no fused multiply-add; DrawnTriangle::meets as
+// drawn_tiles.cpp's meets4 computes it). A row's last four columns may start before the
+// fourth from the row's end (down to the raster's width minus four, so the loads stay inside
+// the raster): a column tested twice, or one outside the span, is not beyond (the span holds
+// every visited column). Needs a raster at least four columns wide.
+__attribute__((target("avx2"))) bool firstBeyondAvx2(const GlobeScan& s, std::size_t* pixel) {
   const __m256d lanes = _mm256_set_pd(3, 2, 1, 0);
-  const __m256d rows = _mm256_set1_pd(row);
   const __m256d sign = _mm256_set1_pd(s.sign);
-  // The edge functions' row terms (b.row - row and so on) are the same along the row.
   const __m256d b_col = _mm256_set1_pd(s.b.col), c_col = _mm256_set1_pd(s.c.col), a_col = _mm256_set1_pd(s.a.col);
-  const __m256d a_row = _mm256_sub_pd(_mm256_set1_pd(s.a.row), rows), b_row = _mm256_sub_pd(_mm256_set1_pd(s.b.row), rows),
-                c_row = _mm256_sub_pd(_mm256_set1_pd(s.c.row), rows);
   const __m256d size = _mm256_set1_pd(s.size), below = _mm256_set1_pd(-s.eps);
   const __m256d reach0 = _mm256_set1_pd(s.reach[0]), reach1 = _mm256_set1_pd(s.reach[1]), reach2 = _mm256_set1_pd(s.reach[2]);
   const __m256d budget = _mm256_set1_pd(s.budget_m), minus_zero = _mm256_set1_pd(-0.0);
@@ -134,81 +151,98 @@ __attribute__((target("avx2"))) int firstBeyondInRow(const GlobeScan& s, int row
     corner_y[k] = _mm256_set1_pd(tri.corner(k).y);
     corner_z[k] = _mm256_set1_pd(tri.corner(k).z);
   }
-  for (int col = first; col <= last; col += 4) {
-    const int start = std::min(col, s.dem.width - 4);
-    const __m256d cols = _mm256_add_pd(_mm256_set1_pd(start), lanes);
-    // sign * ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)), and for c, a.
-    const __m256d ea = _mm256_mul_pd(sign, _mm256_sub_pd(_mm256_mul_pd(_mm256_sub_pd(b_col, cols), c_row),
-                                                         _mm256_mul_pd(b_row, _mm256_sub_pd(c_col, cols))));
-    const __m256d eb = _mm256_mul_pd(sign, _mm256_sub_pd(_mm256_mul_pd(_mm256_sub_pd(c_col, cols), a_row),
-                                                         _mm256_mul_pd(c_row, _mm256_sub_pd(a_col, cols))));
-    const __m256d ec = _mm256_sub_pd(_mm256_sub_pd(size, ea), eb);
-    const __m256d inside = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(ea, below, _CMP_GE_OQ), _mm256_cmp_pd(eb, below, _CMP_GE_OQ)),
-                                         _mm256_cmp_pd(ec, below, _CMP_GE_OQ));
-    const __m256d within = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(ea, reach0, _CMP_NLT_UQ), _mm256_cmp_pd(eb, reach1, _CMP_NLT_UQ)),
-                                         _mm256_cmp_pd(ec, reach2, _CMP_NLT_UQ));
-    const __m256d stray = _mm256_andnot_pd(inside, within);
-    const int inside_bits = _mm256_movemask_pd(inside), stray_bits = _mm256_movemask_pd(stray);
-    if (inside_bits == 0 && stray_bits == 0) continue;
-    // DrawnTriangle::offset: 0 at a corner's own point, else across / along (along = 0 gives an
-    // infinity or NaN, beyond any budget and any reach as the scalar NaN is).
-    const std::size_t i = s.dem.index(start, row);
-    const __m256d x = _mm256_loadu_pd(globe.pointX() + i), y = _mm256_loadu_pd(globe.pointY() + i),
-                  z = _mm256_loadu_pd(globe.pointZ() + i);
-    const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
-                  uz = _mm256_loadu_pd(globe.upZ() + i);
-    const __m256d along = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(n0, ux), _mm256_mul_pd(n1, uy)), _mm256_mul_pd(n2, uz));
-    const __m256d across = _mm256_add_pd(
-        _mm256_add_pd(_mm256_mul_pd(n0, _mm256_sub_pd(ax, x)), _mm256_mul_pd(n1, _mm256_sub_pd(ay, y))),
-        _mm256_mul_pd(n2, _mm256_sub_pd(az, z)));
-    __m256d at_corner = _mm256_setzero_pd();
-    for (int k = 0; k < 3; ++k) {
-      at_corner = _mm256_or_pd(at_corner, _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(x, corner_x[k], _CMP_EQ_OQ),
-                                                                      _mm256_cmp_pd(y, corner_y[k], _CMP_EQ_OQ)),
-                                                        _mm256_cmp_pd(z, corner_z[k], _CMP_EQ_OQ)));
+  for (int row = s.min_row; row <= s.max_row; ++row) {
+    int first, last;
+    s.span(row, &first, &last);
+    if (s.poles && globe.poleRow(row)) {
+      for (int col = first; col <= last; ++col) {
+        if (s.pixelBeyond(col, row, true, pixel)) return true;
+      }
+      continue;
     }
-    const __m256d offset = _mm256_blendv_pd(_mm256_div_pd(across, along), _mm256_setzero_pd(), at_corner);
-    const __m256d magnitude = _mm256_andnot_pd(minus_zero, offset);
-    // Valid (the DEM height not NaN) and !(|offset| <= budget), NaN included.
-    const __m128 heights = _mm_loadu_ps(s.dem.heights_m.data() + i);
-    const __m256d valid = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_castps_si128(_mm_cmpord_ps(heights, heights))));
-    __m256d visited_beyond = _mm256_and_pd(inside, _mm256_cmp_pd(magnitude, budget, _CMP_NLE_UQ));
-    if (stray_bits != 0) {
-      // DrawnTriangle::meets (Moeller-Trumbore), whose offset is offset() above.
-      constexpr double kTolerance = 1e-9;  // DrawnTriangle::meets's
-      const __m256d ab0 = _mm256_set1_pd(tri.ab[0]), ab1 = _mm256_set1_pd(tri.ab[1]), ab2 = _mm256_set1_pd(tri.ab[2]);
-      const __m256d ac0 = _mm256_set1_pd(tri.ac[0]), ac1 = _mm256_set1_pd(tri.ac[1]), ac2 = _mm256_set1_pd(tri.ac[2]);
-      const __m256d px = _mm256_sub_pd(_mm256_mul_pd(uy, ac2), _mm256_mul_pd(uz, ac1)),
-                    py = _mm256_sub_pd(_mm256_mul_pd(uz, ac0), _mm256_mul_pd(ux, ac2)),
-                    pz = _mm256_sub_pd(_mm256_mul_pd(ux, ac1), _mm256_mul_pd(uy, ac0));
-      const __m256d det = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ab0, px), _mm256_mul_pd(ab1, py)), _mm256_mul_pd(ab2, pz));
-      // det != 0 and finite (NaN fails both).
-      __m256d meets = _mm256_and_pd(_mm256_cmp_pd(det, _mm256_setzero_pd(), _CMP_NEQ_OQ),
-                                    _mm256_cmp_pd(_mm256_andnot_pd(minus_zero, det), _mm256_set1_pd(HUGE_VAL), _CMP_LT_OQ));
-      const __m256d inverse = _mm256_div_pd(_mm256_set1_pd(1.0), det);
-      const __m256d tx = _mm256_sub_pd(x, ax), ty = _mm256_sub_pd(y, ay), tz = _mm256_sub_pd(z, az);
-      const __m256d u = _mm256_mul_pd(
-          _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(tx, px), _mm256_mul_pd(ty, py)), _mm256_mul_pd(tz, pz)), inverse);
-      const __m256d low = _mm256_set1_pd(-kTolerance), high = _mm256_set1_pd(1 + kTolerance);
-      // The scalar code refuses u < low or u > high: a NaN goes on, as there.
-      meets = _mm256_and_pd(meets, _mm256_and_pd(_mm256_cmp_pd(u, low, _CMP_NLT_UQ), _mm256_cmp_pd(u, high, _CMP_NGT_UQ)));
-      const __m256d qx = _mm256_sub_pd(_mm256_mul_pd(ty, ab2), _mm256_mul_pd(tz, ab1)),
-                    qy = _mm256_sub_pd(_mm256_mul_pd(tz, ab0), _mm256_mul_pd(tx, ab2)),
-                    qz = _mm256_sub_pd(_mm256_mul_pd(tx, ab1), _mm256_mul_pd(ty, ab0));
-      const __m256d v = _mm256_mul_pd(
-          _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ux, qx), _mm256_mul_pd(uy, qy)), _mm256_mul_pd(uz, qz)), inverse);
-      meets = _mm256_and_pd(meets, _mm256_and_pd(_mm256_cmp_pd(v, low, _CMP_NLT_UQ),
-                                                 _mm256_cmp_pd(_mm256_add_pd(u, v), high, _CMP_NGT_UQ)));
-      meets = _mm256_and_pd(meets, _mm256_cmp_pd(magnitude, _mm256_set1_pd(DrawnTriangle::kReach_m), _CMP_LE_OQ));
-      // A stray pixel met within reach is beyond when !(|offset| <= budget).
-      visited_beyond = _mm256_or_pd(
-          visited_beyond,
-          _mm256_and_pd(_mm256_and_pd(stray, meets), _mm256_cmp_pd(magnitude, budget, _CMP_NLE_UQ)));
+    // The edge functions' row terms (b.row - row and so on) are the same along the row.
+    const __m256d rows = _mm256_set1_pd(row);
+    const __m256d a_row = _mm256_sub_pd(_mm256_set1_pd(s.a.row), rows), b_row = _mm256_sub_pd(_mm256_set1_pd(s.b.row), rows),
+                  c_row = _mm256_sub_pd(_mm256_set1_pd(s.c.row), rows);
+    for (int col = first; col <= last; col += 4) {
+      const int start = std::min(col, s.dem.width - 4);
+      const __m256d cols = _mm256_add_pd(_mm256_set1_pd(start), lanes);
+      // sign * ((b.col - col) * (c.row - row) - (b.row - row) * (c.col - col)), and for c, a.
+      const __m256d ea = _mm256_mul_pd(sign, _mm256_sub_pd(_mm256_mul_pd(_mm256_sub_pd(b_col, cols), c_row),
+                                                           _mm256_mul_pd(b_row, _mm256_sub_pd(c_col, cols))));
+      const __m256d eb = _mm256_mul_pd(sign, _mm256_sub_pd(_mm256_mul_pd(_mm256_sub_pd(c_col, cols), a_row),
+                                                           _mm256_mul_pd(c_row, _mm256_sub_pd(a_col, cols))));
+      const __m256d ec = _mm256_sub_pd(_mm256_sub_pd(size, ea), eb);
+      const __m256d inside = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(ea, below, _CMP_GE_OQ), _mm256_cmp_pd(eb, below, _CMP_GE_OQ)),
+                                           _mm256_cmp_pd(ec, below, _CMP_GE_OQ));
+      const __m256d within = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(ea, reach0, _CMP_NLT_UQ), _mm256_cmp_pd(eb, reach1, _CMP_NLT_UQ)),
+                                           _mm256_cmp_pd(ec, reach2, _CMP_NLT_UQ));
+      const __m256d stray = _mm256_andnot_pd(inside, within);
+      const int inside_bits = _mm256_movemask_pd(inside), stray_bits = _mm256_movemask_pd(stray);
+      if (inside_bits == 0 && stray_bits == 0) continue;
+      // DrawnTriangle::offset: 0 at a corner's own point, else across / along (along = 0 gives an
+      // infinity or NaN, beyond any budget and any reach as the scalar NaN is).
+      const std::size_t i = s.dem.index(start, row);
+      const __m256d x = _mm256_loadu_pd(globe.pointX() + i), y = _mm256_loadu_pd(globe.pointY() + i),
+                    z = _mm256_loadu_pd(globe.pointZ() + i);
+      const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
+                    uz = _mm256_loadu_pd(globe.upZ() + i);
+      const __m256d along = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(n0, ux), _mm256_mul_pd(n1, uy)), _mm256_mul_pd(n2, uz));
+      const __m256d across = _mm256_add_pd(
+          _mm256_add_pd(_mm256_mul_pd(n0, _mm256_sub_pd(ax, x)), _mm256_mul_pd(n1, _mm256_sub_pd(ay, y))),
+          _mm256_mul_pd(n2, _mm256_sub_pd(az, z)));
+      __m256d at_corner = _mm256_setzero_pd();
+      for (int k = 0; k < 3; ++k) {
+        at_corner = _mm256_or_pd(at_corner, _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(x, corner_x[k], _CMP_EQ_OQ),
+                                                                        _mm256_cmp_pd(y, corner_y[k], _CMP_EQ_OQ)),
+                                                          _mm256_cmp_pd(z, corner_z[k], _CMP_EQ_OQ)));
+      }
+      const __m256d offset = _mm256_blendv_pd(_mm256_div_pd(across, along), _mm256_setzero_pd(), at_corner);
+      const __m256d magnitude = _mm256_andnot_pd(minus_zero, offset);
+      // Valid (the DEM height not NaN) and !(|offset| <= budget), NaN included.
+      const __m128 heights = _mm_loadu_ps(s.dem.heights_m.data() + i);
+      const __m256d valid = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_castps_si128(_mm_cmpord_ps(heights, heights))));
+      __m256d visited_beyond = _mm256_and_pd(inside, _mm256_cmp_pd(magnitude, budget, _CMP_NLE_UQ));
+      if (stray_bits != 0) {
+        // DrawnTriangle::meets (Moeller-Trumbore), whose offset is offset() above.
+        constexpr double kTolerance = 1e-9;  // DrawnTriangle::meets's
+        const __m256d ab0 = _mm256_set1_pd(tri.ab[0]), ab1 = _mm256_set1_pd(tri.ab[1]), ab2 = _mm256_set1_pd(tri.ab[2]);
+        const __m256d ac0 = _mm256_set1_pd(tri.ac[0]), ac1 = _mm256_set1_pd(tri.ac[1]), ac2 = _mm256_set1_pd(tri.ac[2]);
+        const __m256d px = _mm256_sub_pd(_mm256_mul_pd(uy, ac2), _mm256_mul_pd(uz, ac1)),
+                      py = _mm256_sub_pd(_mm256_mul_pd(uz, ac0), _mm256_mul_pd(ux, ac2)),
+                      pz = _mm256_sub_pd(_mm256_mul_pd(ux, ac1), _mm256_mul_pd(uy, ac0));
+        const __m256d det = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ab0, px), _mm256_mul_pd(ab1, py)), _mm256_mul_pd(ab2, pz));
+        // det != 0 and finite (NaN fails both).
+        __m256d meets = _mm256_and_pd(_mm256_cmp_pd(det, _mm256_setzero_pd(), _CMP_NEQ_OQ),
+                                      _mm256_cmp_pd(_mm256_andnot_pd(minus_zero, det), _mm256_set1_pd(HUGE_VAL), _CMP_LT_OQ));
+        const __m256d inverse = _mm256_div_pd(_mm256_set1_pd(1.0), det);
+        const __m256d tx = _mm256_sub_pd(x, ax), ty = _mm256_sub_pd(y, ay), tz = _mm256_sub_pd(z, az);
+        const __m256d u = _mm256_mul_pd(
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(tx, px), _mm256_mul_pd(ty, py)), _mm256_mul_pd(tz, pz)), inverse);
+        const __m256d low = _mm256_set1_pd(-kTolerance), high = _mm256_set1_pd(1 + kTolerance);
+        // The scalar code refuses u < low or u > high: a NaN goes on, as there.
+        meets = _mm256_and_pd(meets, _mm256_and_pd(_mm256_cmp_pd(u, low, _CMP_NLT_UQ), _mm256_cmp_pd(u, high, _CMP_NGT_UQ)));
+        const __m256d qx = _mm256_sub_pd(_mm256_mul_pd(ty, ab2), _mm256_mul_pd(tz, ab1)),
+                      qy = _mm256_sub_pd(_mm256_mul_pd(tz, ab0), _mm256_mul_pd(tx, ab2)),
+                      qz = _mm256_sub_pd(_mm256_mul_pd(tx, ab1), _mm256_mul_pd(ty, ab0));
+        const __m256d v = _mm256_mul_pd(
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ux, qx), _mm256_mul_pd(uy, qy)), _mm256_mul_pd(uz, qz)), inverse);
+        meets = _mm256_and_pd(meets, _mm256_and_pd(_mm256_cmp_pd(v, low, _CMP_NLT_UQ),
+                                                   _mm256_cmp_pd(_mm256_add_pd(u, v), high, _CMP_NGT_UQ)));
+        meets = _mm256_and_pd(meets, _mm256_cmp_pd(magnitude, _mm256_set1_pd(DrawnTriangle::kReach_m), _CMP_LE_OQ));
+        // A stray pixel met within reach is beyond when !(|offset| <= budget).
+        visited_beyond = _mm256_or_pd(
+            visited_beyond,
+            _mm256_and_pd(_mm256_and_pd(stray, meets), _mm256_cmp_pd(magnitude, budget, _CMP_NLE_UQ)));
+      }
+      const unsigned over = static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(visited_beyond, valid)));
+      if (over != 0) {
+        *pixel = s.dem.index(start + std::countr_zero(over), row);  // the scan's order: the first
+        return true;
+      }
     }
-    const unsigned over = static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(visited_beyond, valid)));
-    if (over != 0) return start + std::countr_zero(over);  // the scan's order: the first
-    }
-  return -1;
+  }
+  return false;
 }
 #endif
 
@@ -241,39 +275,26 @@ bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const Gri
                                                  GridCorner{c.col, c.row, onPoleRow(c)}},
                                          drawn.longestEdge(), 0.0);
   const double margin_px = std::max(margin.columns, margin.rows);
-  GlobeScan scan{globe, dem, a, b, c, drawn, budget_m, area2, area2 > 0 ? 1.0 : -1.0, std::fabs(area2), 1e-9 * std::fabs(area2), {}};
+  GlobeScan scan{globe, dem, a, b, c, drawn, budget_m, area2, area2 > 0 ? 1.0 : -1.0, std::fabs(area2), 1e-9 * std::fabs(area2),
+                 {}, 0, 0, 0, 0, poles};
   const double edge_length[3] = {std::sqrt((c.col - b.col) * (c.col - b.col) + (c.row - b.row) * (c.row - b.row)),
                                  std::sqrt((a.col - c.col) * (a.col - c.col) + (a.row - c.row) * (a.row - c.row)),
                                  std::sqrt((b.col - a.col) * (b.col - a.col) + (b.row - a.row) * (b.row - a.row))};
   for (int k = 0; k < 3; ++k) scan.reach[k] = -margin_px * edge_length[k];
-  const int min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.columns - 1e-9)));
-  const int max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.columns + 1e-9)));
-  const int min_row = static_cast<int>(std::max(0.0, std::ceil(std::min({a.row, b.row, c.row}) - margin.rows - 1e-9)));
-  const int max_row = static_cast<int>(std::min(dem.height - 1.0, std::floor(std::max({a.row, b.row, c.row}) + margin.rows + 1e-9)));
+  scan.min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.columns - 1e-9)));
+  scan.max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.columns + 1e-9)));
+  scan.min_row = static_cast<int>(std::max(0.0, std::ceil(std::min({a.row, b.row, c.row}) - margin.rows - 1e-9)));
+  scan.max_row = static_cast<int>(std::min(dem.height - 1.0, std::floor(std::max({a.row, b.row, c.row}) + margin.rows + 1e-9)));
   std::size_t pixel = 0;
-  const auto found = [&] {
-    if (violating_pixel) *violating_pixel = pixel;
-    return true;
-  };
-  for (int row = min_row; row <= max_row; ++row) {
-    const bool pole_row = poles && globe.poleRow(row);
-    int first, last;
-    scan.span(row, min_col, max_col, &first, &last);
-    int col = first;
+  bool exceeds;
 #if defined(__x86_64__)
-    if (kHasAvx2 && !pole_row && dem.width >= 4) {
-      if (first > last) continue;
-      const int beyond_col = firstBeyondInRow(scan, row, first, last);
-      if (beyond_col < 0) continue;
-      pixel = dem.index(beyond_col, row);
-      return found();
-    }
+  if (kHasAvx2 && dem.width >= 4) exceeds = firstBeyondAvx2(scan, &pixel);
+  else exceeds = firstBeyond(scan, &pixel);
+#else
+  exceeds = firstBeyond(scan, &pixel);
 #endif
-    for (; col <= last; ++col) {
-      if (scan.pixelBeyond(col, row, pole_row, &pixel)) return found();
-    }
-  }
-  return false;
+  if (exceeds && violating_pixel) *violating_pixel = pixel;
+  return exceeds;
 }
 
 }  // namespace cluster_collapse
