@@ -180,6 +180,8 @@ inline bool isSteepSliver(const GridPoint& a, const GridPoint& b, const GridPoin
 // corners' ECEF positions), so measureTin confirms the budget.
 bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, const GridPoint& c, double budget_m);
 // violating_pixel: when not null and the budget is exceeded, the first pixel found beyond it.
+// On the globe (budget_scan.cpp): forEachCoveredPixelOnGlobe's scan, on the columns of each
+// row that can be visited and four at a time with AVX2; the same verdict and first pixel.
 bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                           const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
                           std::size_t* violating_pixel = nullptr);

@@ -89,6 +89,21 @@ struct ClusterArrays {
     EcefPoint ecef;
   };
   std::vector<PlacedPoint> placed_points = std::vector<PlacedPoint>(65536);
+  // Quadric optima of edges between free vertices, by the edge's ends and their versions
+  // (direct-mapped): an edge's optimum (the same from either end: Q_u + Q_v has the same bits
+  // as Q_v + Q_u) is asked for by both ends when they are queued, and again whenever a
+  // collapse next to an end queues it again, but changes only when a collapse changes an end
+  // (its version: a collapse into v gives v a new quadric, and may move it). `generation`
+  // tells the clusters (and a split cluster's two runs) apart.
+  struct EdgeOptimum {
+    std::uint32_t lo = kNone, hi = kNone, lo_version = 0, hi_version = 0, generation = 0;
+    bool moves = false;  // false: no optimum (ill-conditioned, or at an end)
+    double cost = 0;
+    GridPoint placed;
+  };
+  std::vector<EdgeOptimum> edge_optima = std::vector<EdgeOptimum>(16384);
+  std::vector<std::uint32_t> version;  // per local vertex
+  std::uint32_t generation = 0;
 };
 
 // How a cluster is loaded besides its faces: for a part of a split cluster, and for the whole
@@ -241,6 +256,21 @@ class ClusterCollapser {
                           g0.height_m + *t * (g1.height_m - g0.height_m)});
   }
 
+  // quadricOptimum(q, u, v), remembered for the edge uv until a collapse changes u or v.
+  Collapse cachedOptimum(const Quadric& q, std::uint32_t u, std::uint32_t v) {
+    const std::uint32_t lo = std::min(u, v), hi = std::max(u, v);
+    const std::uint64_t hash = (std::uint64_t{lo} * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t{hi} * 0xC2B2AE3D27D4EB4Full);
+    ClusterArrays::EdgeOptimum& entry = a_.edge_optima[(hash >> 32) & (a_.edge_optima.size() - 1)];
+    if (entry.lo != lo || entry.hi != hi || entry.lo_version != a_.version[lo] || entry.hi_version != a_.version[hi] ||
+        entry.generation != a_.generation) {
+      const Collapse optimum = quadricOptimum(q, u, v);
+      entry = {lo, hi, a_.version[lo], a_.version[hi], a_.generation, optimum.moves, optimum.cost, optimum.placed};
+    }
+    Collapse collapse;
+    if (entry.moves) collapse = {entry.cost, v, true, entry.placed};
+    return collapse;
+  }
+
   // Both ends free: the edge's quadric optimum (CGAL's Garland-Heckbert placement) with its
   // cost; none (moves false) when the 3x3 system is ill-conditioned or the optimum is an end.
   Collapse quadricOptimum(const Quadric& q, std::uint32_t u, std::uint32_t v) const {
@@ -362,12 +392,12 @@ class ClusterCollapser {
   // quadric's least value), so `all` false leaves it out when the optimum exists: the
   // cheapest of them (the queue's key) needs it only when the optimum does not.
   template <typename Add>
-  void collapsesInto(std::uint32_t u, std::uint32_t v, bool all, Add&& add) const {
+  void collapsesInto(std::uint32_t u, std::uint32_t v, bool all, Add&& add) {
     const Quadric q = combined(u, v);
     const auto& p = a_.metres[v];
     add(Collapse{std::max(0.0, evaluate(q, p[0], p[1], p[2])), v, false, a_.grid[v]});
     if (a_.locked[v]) return;
-    const Collapse moved = quadricOptimum(q, u, v);
+    const Collapse moved = cachedOptimum(q, u, v);
     if (moved.moves) add(moved);
     if (moved.moves && !all) return;
     const Collapse on_edge = segmentOptimum(q, u, v);
@@ -375,9 +405,10 @@ class ClusterCollapser {
   }
 
   // Queues u (free, not removed) at its cheapest collapse, superseding its earlier place.
-  void enqueue(std::uint32_t u) {
+  // `gathered`: u's star is in u_triangles and u_ring already.
+  void enqueue(std::uint32_t u, bool gathered = false) {
     if (a_.locked[u] || a_.removed[u]) return;
-    gatherStar(u, a_.u_triangles, a_.u_ring);
+    if (!gathered) gatherStar(u, a_.u_triangles, a_.u_ring);
     Collapse cheapest;
     cheapest.cost = std::numeric_limits<double>::infinity();
     for (const std::uint32_t v : a_.u_ring) {
@@ -417,6 +448,11 @@ class ClusterCollapser {
     for (std::uint32_t v = 0; v < vertices; ++v) a_.absorbed_last[v] = v;
     a_.removed.assign(vertices, 0);
     a_.broken_pixel.assign(vertices, kNoPixel);
+    a_.version.assign(vertices, 0);
+    if (++a_.generation == 0) {  // wrapped: forget every entry
+      a_.edge_optima.assign(a_.edge_optima.size(), ClusterArrays::EdgeOptimum{});
+      a_.generation = 1;
+    }
     a_.best.assign(vertices, Collapse{});
     a_.heap.clear();
     a_.heap_place.assign(vertices, kNone);
@@ -448,6 +484,13 @@ class ClusterCollapser {
   // Applies the collapse of u when the filter accepts it. Needs u's star gathered.
   bool accepts(std::uint32_t u, const Collapse& collapse, ClusterOutput& out) {
     const std::uint32_t v = collapse.v;
+    // The placed point's slot is almost never in the cache (3 MB, read at random): fetch it
+    // while the star and the fold-over tests run.
+    if (options_.globe && collapse.moves) {
+      const char* slot = reinterpret_cast<const char*>(&placedPointSlot(collapse.placed));
+      __builtin_prefetch(slot);
+      __builtin_prefetch(slot + sizeof(ClusterArrays::PlacedPoint) - 1);  // it may span two lines
+    }
     gatherStar(v, a_.v_triangles, a_.v_ring);
     const GridPoint& placed = collapse.placed;
     if (!linkIsTwoVertices(u) || !keepsHeightField(u, v, collapse.moves, placed)) {
@@ -504,12 +547,16 @@ class ClusterCollapser {
     });
   }
 
-  EcefPoint placeOnGlobe(const GridPoint& g) {
+  ClusterArrays::PlacedPoint& placedPointSlot(const GridPoint& g) {
     std::uint64_t bits[3];
     std::memcpy(bits, &g, sizeof bits);
     std::uint64_t hash = (bits[0] * 0x9E3779B97F4A7C15ull) ^ (bits[1] * 0xC2B2AE3D27D4EB4Full) ^ (bits[2] * 0x165667B19E3779F9ull);
     hash ^= hash >> 29;
-    ClusterArrays::PlacedPoint& entry = a_.placed_points[hash & (a_.placed_points.size() - 1)];
+    return a_.placed_points[hash & (a_.placed_points.size() - 1)];
+  }
+
+  EcefPoint placeOnGlobe(const GridPoint& g) {
+    ClusterArrays::PlacedPoint& entry = placedPointSlot(g);
     if (std::memcmp(&entry.grid, &g, sizeof g) != 0) {
       entry.grid = g;
       entry.ecef = options_.globe->place(g);
@@ -563,13 +610,14 @@ class ClusterCollapser {
       if (options_.globe) a_.ecef[v] = placed_ecef;
     }
     a_.removed[u] = 1;
+    ++a_.version[v];  // a new quadric, maybe a new place: its edges' optima change
     a_.absorbed_next[a_.absorbed_last[v]] = u;
     a_.absorbed_last[v] = a_.absorbed_last[u];
     edges_ -= 3;
     // v's star now holds u's: v and every vertex around it have new collapses.
-    gatherStar(v, a_.v_triangles, a_.v_ring);
-    a_.around.assign(a_.v_ring.begin(), a_.v_ring.end());  // enqueue reuses the star arrays
-    enqueue(v);
+    gatherStar(v, a_.u_triangles, a_.u_ring);  // u's are done with
+    a_.around.assign(a_.u_ring.begin(), a_.u_ring.end());  // requeueNextTo reuses the star arrays
+    enqueue(v, true);
     for (const std::uint32_t w : a_.around) requeueNextTo(w, u, v);
   }
 

@@ -122,6 +122,8 @@ InputTopology buildTopology(const TinMesh& mesh) {
   for (std::uint32_t u = 0; u < vertices; ++u) {
     for (std::uint32_t e = start[u]; e < start[u + 1]; ++e) {
       const std::uint32_t c = leaving[e], v = end[e];
+      // Found from the other side: that side counted both directions of the edge already.
+      if (topology.opposite_corner[c] != kNone) continue;
       // Corners running u -> v (c among them, in corner order) and v -> u.
       std::uint32_t along[2], against = kNone;
       std::size_t same = 0, reverse = 0;
@@ -142,7 +144,10 @@ InputTopology buildTopology(const TinMesh& mesh) {
                         std::to_string(along[1] / 3) + " run edge " + edgeText(edgeKey(u, v)) +
                         " in the same direction; expected every triangle counter-clockwise seen from above");
       }
-      if (reverse == 1) topology.opposite_corner[c] = against;
+      if (reverse == 1) {
+        topology.opposite_corner[c] = against;
+        topology.opposite_corner[against] = c;
+      }
     }
   }
   return topology;
@@ -164,17 +169,7 @@ bool exceedsBudget(const DemGrid& dem, const GridPoint& a, const GridPoint& b, c
   return exceeds;
 }
 
-bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
-                          const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,
-                          std::size_t* violating_pixel) {
-  bool exceeds = false;
-  forEachCoveredPixelOnGlobe(globe, a, b, c, pa, pb, pc, [&](std::size_t i, double offset_m) {
-    exceeds = !std::isnan(globe.dem().heights_m[i]) && !(std::fabs(offset_m) <= budget_m);
-    if (exceeds && violating_pixel) *violating_pixel = i;
-    return !exceeds;
-  });
-  return exceeds;
-}
+// exceedsBudgetOnGlobe: budget_scan.cpp.
 
 bool exceedsBudgetAtPixel(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                           const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double budget_m,

@@ -19,7 +19,8 @@
 // cheapest, and the first the filter accepts is applied; the merged vertex and its ring are
 // queued again at their new costs, and a vertex the filter refused every way comes back when a
 // collapse changes its star. A vertex's triangles are its initial ones (CSR) plus those of
-// the vertices it absorbed (a chain), so nothing allocates per collapse: each thread keeps one
+// the vertices it absorbed (a chain), and an edge's quadric optimum is remembered until a
+// collapse changes one of its ends, so nothing allocates per collapse: each thread keeps one
 // set of arrays for all its clusters.
 //
 // Simplifier::Cgal (the default and the quality reference): each cluster's triangles

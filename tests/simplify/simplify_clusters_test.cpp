@@ -11,8 +11,10 @@
 #include <vector>
 
 #include "formats/dem/read_dem.h"
+#include "formats/geoid/read_geoid.h"
 #include "src/base/error.h"
 #include "src/base/progress.h"
+#include "src/geo/dem_on_globe.h"
 #include "src/simplify/cluster_collapse.h"
 #include "src/simplify/simplify_clusters.h"
 #include "src/tin/build_tin.h"
@@ -402,6 +404,72 @@ TEST_SUITE("simplify") {
       CHECK(report.after.covered_nodata_pixels == 0);
       CHECK(report.after.max_error_m <= 1.0);
     }
+  }
+
+  TEST_CASE("the budget scan on the globe decides as measureTin's scan on random triangles") {
+    // exceedsBudgetOnGlobe narrows each row and tests four pixels at a time; it must find
+    // the same first pixel beyond the budget as forEachCoveredPixelOnGlobe, whose rule
+    // measureTin uses: on SRTM N57E011 and on ETOPO5's north-west corner (a pole row, long
+    // chords that stray), for triangles from slivers to hundreds of pixels, corners on pixel
+    // centres at their DEM heights (offset 0 there) or anywhere.
+    const GeoidGrid geoid = readGeoidGrid(kDefaultGeoidPath);
+    const auto crop = [](const DemGrid& dem, int width, int height) {
+      DemGrid out = dem;
+      out.width = width;
+      out.height = height;
+      out.heights_m.resize(out.pixelCount());
+      for (int row = 0; row < height; ++row) {
+        for (int col = 0; col < width; ++col) out.heights_m[out.index(col, row)] = dem.heightAt(col, row);
+      }
+      return out;
+    };
+    const DemGrid srtm = crop(readDem({test::sharedData("srtm3_N57E011_4326.tif")}), 300, 200);
+    const DemGrid etopo = crop(readDem({test::sharedData("etopo5_global_4326.tif")}), 300, 200);
+    std::size_t beyond = 0, within = 0;
+    for (const DemGrid* dem : {&srtm, &etopo}) {
+      const DemOnGlobe globe(*dem, &geoid);
+      std::mt19937 random(7);
+      std::uniform_real_distribution<double> col_of(-5.0, dem->width + 5.0), row_of(0.0, dem->height + 5.0);
+      std::uniform_real_distribution<double> unit(0.0, 1.0);
+      for (int i = 0; i < 20000; ++i) {
+        std::array<GridPoint, 3> g;
+        const double size = std::pow(10.0, 3 * unit(random));  // 1 .. 1000 pixels
+        const double col0 = col_of(random), row0 = row_of(random);
+        for (GridPoint& p : g) {
+          p.col = col0 + size * (unit(random) - 0.5);
+          p.row = std::max(0.0, row0 + size * (unit(random) - 0.5));  // not beyond ETOPO5's pole
+          if (i % 3 != 0 || i % 7 == 0) {  // on a pixel centre (i % 7: row 0, the pole row on ETOPO5)
+            p.col = std::clamp(std::round(p.col), 0.0, dem->width - 1.0);
+            p.row = i % 7 == 0 ? 0 : std::clamp(std::round(p.row), 0.0, dem->height - 1.0);
+          }
+          const int col = std::clamp(static_cast<int>(std::round(p.col)), 0, dem->width - 1);
+          const int row = std::clamp(static_cast<int>(std::round(p.row)), 0, dem->height - 1);
+          const double h = dem->heightAt(col, row);
+          p.height_m = (i % 3 != 0 && !std::isnan(h) ? h : 0.0) + (i % 5 == 0 ? 0.0 : 200 * (unit(random) - 0.5));
+        }
+        if (i % 11 == 0) g[2] = {0.5 * (g[0].col + g[1].col) + 1e-3, 0.5 * (g[0].row + g[1].row), g[2].height_m};
+        if (cluster_collapse::signedArea2(g[0], g[1], g[2]) > 0) std::swap(g[1], g[2]);
+        std::array<EcefPoint, 3> e;
+        for (int k = 0; k < 3; ++k) e[k] = globe.place(g[k]);
+        const double budget_m = std::array<double, 4>{1.0, 10.0, 50.0, 200.0}[i % 4];
+        std::size_t expected_pixel = 0;
+        bool expected = false;
+        forEachCoveredPixelOnGlobe(globe, g[0], g[1], g[2], e[0], e[1], e[2], [&](std::size_t pixel, double offset_m) {
+          expected = !std::isnan(dem->heights_m[pixel]) && !(std::fabs(offset_m) <= budget_m);
+          if (expected) expected_pixel = pixel;
+          return !expected;
+        });
+        std::size_t pixel = 0;
+        const bool found =
+            cluster_collapse::exceedsBudgetOnGlobe(globe, g[0], g[1], g[2], e[0], e[1], e[2], budget_m, &pixel);
+        CAPTURE(i);
+        REQUIRE(found == expected);
+        if (expected) REQUIRE(pixel == expected_pixel);
+        ++(expected ? beyond : within);
+      }
+    }
+    CHECK(beyond > 5000);
+    CHECK(within > 5000);
   }
 
   TEST_CASE("the native engine keeps the CGAL reference's quality on real levels") {
