@@ -15,6 +15,7 @@
 #endif
 
 #include "src/geo/dem_on_globe.h"
+#include "src/geo/dem_on_globe_lanes.h"
 #include "src/geo/drawn_pixels.h"
 #include "src/geo/drawn_triangle.h"
 #include "src/simplify/cluster_collapse.h"
@@ -63,10 +64,10 @@ struct GlobeScan {
         const double wa = e[0] * sign / area2, wb = e[1] * sign / area2;
         offset_m = wa * a.height_m + wb * b.height_m + (1.0 - wa - wb) * c.height_m - dem.heights_m[pixel];
       } else {
-        offset_m = drawn.offset(globe.point(pixel), globe.up(pixel));
+        offset_m = drawn.offset(globe.point(col, row), globe.up(col, row));
       }
     } else if (pole_row || e[0] < reach[0] || e[1] < reach[1] || e[2] < reach[2] ||
-               !drawn.meets(globe.point(pixel), globe.up(pixel), &offset_m)) {
+               !drawn.meets(globe.point(col, row), globe.up(col, row), &offset_m)) {
       return false;
     }
     if (!beyond(dem, pixel, offset_m, budget_m)) return false;
@@ -183,10 +184,8 @@ __attribute__((target("avx2"))) bool firstBeyondAvx2(const GlobeScan& s, std::si
       // DrawnTriangle::offset: 0 at a corner's own point, else across / along (along = 0 gives an
       // infinity or NaN, beyond any budget and any reach as the scalar NaN is).
       const std::size_t i = s.dem.index(start, row);
-      const __m256d x = _mm256_loadu_pd(globe.pointX() + i), y = _mm256_loadu_pd(globe.pointY() + i),
-                    z = _mm256_loadu_pd(globe.pointZ() + i);
-      const __m256d ux = _mm256_loadu_pd(globe.upX() + i), uy = _mm256_loadu_pd(globe.upY() + i),
-                    uz = _mm256_loadu_pd(globe.upZ() + i);
+      const PixelLanes pixels = pixelLanes(globe, start, row, i);
+      const __m256d x = pixels.x, y = pixels.y, z = pixels.z, ux = pixels.ux, uy = pixels.uy, uz = pixels.uz;
       const __m256d along = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(n0, ux), _mm256_mul_pd(n1, uy)), _mm256_mul_pd(n2, uz));
       const __m256d across = _mm256_add_pd(
           _mm256_add_pd(_mm256_mul_pd(n0, _mm256_sub_pd(ax, x)), _mm256_mul_pd(n1, _mm256_sub_pd(ay, y))),
