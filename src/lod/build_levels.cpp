@@ -76,6 +76,34 @@ std::vector<std::uint64_t> meshEdgeKeys(const TinMesh& mesh) {
   return keys;
 }
 
+std::size_t meshEdgeCount(const TinMesh& mesh) {
+  const auto& idx = mesh.triangle_indices;
+  const std::size_t vertices = mesh.vertices.size();
+  std::vector<std::uint32_t> start(vertices + 1, 0), end(idx.size());
+  for (std::size_t s = 0; s < idx.size(); ++s) ++start[idx[s] + 1];
+  for (std::size_t v = 0; v < vertices; ++v) start[v + 1] += start[v];
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::size_t s = 0; s < idx.size(); ++s) end[fill[idx[s]]++] = idx[s % 3 == 2 ? s - 2 : s + 1];
+  }
+  const auto leaves = [&](std::uint32_t from, std::uint32_t to, std::uint32_t before) {
+    for (std::uint32_t i = start[from]; i < before; ++i) {
+      if (end[i] == to) return true;
+    }
+    return false;
+  };
+  std::size_t count = 0;
+  for (std::uint32_t u = 0; u < vertices; ++u) {
+    for (std::uint32_t e = start[u]; e < start[u + 1]; ++e) {
+      const std::uint32_t v = end[e];
+      if (leaves(u, v, e)) continue;                     // counted at its first appearance
+      if (v < u && leaves(v, u, start[v + 1])) continue;  // counted at v, its lower end
+      ++count;
+    }
+  }
+  return count;
+}
+
 std::vector<std::array<std::uint32_t, 2>> randomFaceSetConstraints(const TinMesh& mesh, std::size_t count,
                                                                    std::size_t set_faces, std::uint32_t seed) {
   std::vector<std::array<std::uint32_t, 2>> edges;
@@ -127,7 +155,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     } else if (options.measure) {
       level.error = measureTin(dem, level.mesh);
     }
-    if (l == 0) level.edge_count = meshEdgeKeys(level.mesh).size();  // coarser levels: counted below
+    if (l == 0) level.edge_count = meshEdgeCount(level.mesh);  // coarser levels: counted below
     progress.endStage();
     const std::size_t triangles = level.mesh.triangleCount();
     if (options.coarser_levels > 0 && l >= static_cast<std::size_t>(options.coarser_levels)) break;
@@ -167,12 +195,14 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
                                                         level.partition.cluster_count, constraints, simplify);
     progress.endStage();
     progress.throwIfCancelled();
-    const std::vector<std::uint64_t> edges = meshEdgeKeys(simplified.mesh);
+    // The coarser level's edges: counted, and listed when constraints must be found among them.
+    const std::size_t edge_count = meshEdgeCount(simplified.mesh);
+    const std::vector<std::uint64_t> edges = constraints.empty() ? std::vector<std::uint64_t>() : meshEdgeKeys(simplified.mesh);
     if (options.coarser_levels == 0) {
       // A level must be worth its tiles: about level_ratio of the edges, or (when the budget
       // stopped it) at least 10 % fewer triangles. Otherwise the locked edges (outer border,
       // constraints) dominate and the finer level is the coarsest.
-      const double edge_ratio = static_cast<double>(edges.size()) / static_cast<double>(level.edge_count);
+      const double edge_ratio = static_cast<double>(edge_count) / static_cast<double>(level.edge_count);
       const bool halved = edge_ratio <= options.level_ratio + 0.1;
       const bool budget_bound = simplified.refused_for_error > 0 && simplified.mesh.triangleCount() <= triangles * 9 / 10;
       if (!halved && !budget_bound) {
@@ -193,7 +223,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     }
     level.index_in_coarser = std::move(simplified.new_index_of_vertex);
     next.mesh = std::move(simplified.mesh);
-    next.edge_count = edges.size();
+    next.edge_count = edge_count;
     next.inherited_partition = {simplified.cluster_of_face, level.partition.cluster_count};
     inherited = {std::move(simplified.cluster_of_face), level.partition.cluster_count};
     next.refused_for_error = simplified.refused_for_error;

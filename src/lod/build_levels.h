@@ -107,6 +107,9 @@ std::array<double, 2> groundMetresPerPixel(const DemGrid& dem);
 
 // The undirected edges of a mesh, as sorted (low << 32 | high) keys.
 std::vector<std::uint64_t> meshEdgeKeys(const TinMesh& mesh);
+// How many they are (meshEdgeKeys(mesh).size()), in linear time: each vertex's edges leaving
+// it, an edge counted at its lower end when it leaves from there, else at its upper end.
+std::size_t meshEdgeCount(const TinMesh& mesh);
 
 // Feature constraints as the paper made them (4.2): `count` random connected sets of up to
 // `set_faces` triangles (grown breadth-first from random seed triangles), every edge of them

@@ -73,6 +73,8 @@ void checkLevels(const std::string& raster, double tin_max_error_m, bool with_bu
   if (with_budget) options.first_budget_m = 2 * tin_max_error_m;
   const std::vector<Level> levels = buildLevels(dem, finest, options, constraints, quiet);
   MESSAGE(raster << ": " << levels.size() << " levels");
+  CHECK(meshEdgeCount(finest) == finest_edges.size());
+  for (const Level& level : levels) CHECK(level.edge_count == meshEdgeKeys(level.mesh).size());
   CHECK(levels.size() >= 5);  // the finest and at least 4 coarser
   const TinErrorStatistics& finest_error = levels[0].error;
   double finest_area = 0;
@@ -147,6 +149,18 @@ void checkLevels(const std::string& raster, double tin_max_error_m, bool with_bu
 }  // namespace
 
 TEST_SUITE("lod") {
+
+TEST_CASE("meshEdgeCount counts the edges meshEdgeKeys lists, also of meshes that are not manifold") {
+  // A fan of two triangles, the same two again (every edge twice in one direction), one
+  // reversed, a degenerate one and an isolated one.
+  TinMesh mesh;
+  mesh.vertices.resize(8);
+  mesh.triangle_indices = {0, 1, 2, 0, 2, 3, 0, 1, 2, 0, 2, 3, 2, 1, 0, 4, 4, 5, 5, 6, 7};
+  CHECK(meshEdgeCount(mesh) == meshEdgeKeys(mesh).size());
+  CHECK(meshEdgeCount(mesh) == 5 + 2 + 3);  // 01 12 20 23 30; 44 45; 56 67 75
+  mesh.triangle_indices.resize(6);
+  CHECK(meshEdgeCount(mesh) == 5);
+}
 
 TEST_CASE("cluster levels on the Interlaken DHM25 tile") {
   checkLevels("ch_dhm25_interlaken_25m_2056.tif", 0.5, false);
