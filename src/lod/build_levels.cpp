@@ -77,15 +77,10 @@ std::vector<std::uint64_t> meshEdgeKeys(const TinMesh& mesh) {
 }
 
 std::size_t meshEdgeCount(const TinMesh& mesh) {
-  const auto& idx = mesh.triangle_indices;
   const std::size_t vertices = mesh.vertices.size();
-  std::vector<std::uint32_t> start(vertices + 1, 0), end(idx.size());
-  for (std::size_t s = 0; s < idx.size(); ++s) ++start[idx[s] + 1];
-  for (std::size_t v = 0; v < vertices; ++v) start[v + 1] += start[v];
-  {
-    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (std::size_t s = 0; s < idx.size(); ++s) end[fill[idx[s]]++] = idx[s % 3 == 2 ? s - 2 : s + 1];
-  }
+  const CornersLeaving grouped = cornersLeaving(mesh);
+  const std::vector<std::uint32_t>& start = grouped.start;
+  const std::vector<std::uint32_t>& end = grouped.end;
   const auto leaves = [&](std::uint32_t from, std::uint32_t to, std::uint32_t before) {
     for (std::uint32_t i = start[from]; i < before; ++i) {
       if (end[i] == to) return true;

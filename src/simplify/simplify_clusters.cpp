@@ -100,23 +100,12 @@ InputTopology buildTopology(const TinMesh& mesh) {
   const std::size_t corners = idx.size();
   TERRATILES_ASSERT(corners < kNone);
   InputTopology topology;
-  std::vector<std::uint32_t>& start = topology.leaving_start;
-  std::vector<std::uint32_t>& leaving = topology.leaving;
-  start.assign(mesh.vertices.size() + 1, 0);
-  for (std::uint32_t c = 0; c < corners; ++c) ++start[idx[c] + 1];
-  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) start[v + 1] += start[v];
-  leaving.resize(corners);
-  std::vector<std::uint32_t> end(corners);  // per entry of `leaving`: the vertex it runs to
-  {
-    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (std::uint32_t t = 0; 3 * t < corners; ++t) {
-      for (std::uint32_t k = 0; k < 3; ++k) {
-        const std::uint32_t c = 3 * t + k, i = fill[idx[c]]++;
-        leaving[i] = c;  // in corner order
-        end[i] = idx[3 * t + (k == 2 ? 0 : k + 1)];
-      }
-    }
-  }
+  CornersLeaving grouped = cornersLeaving(mesh);
+  topology.leaving_start = std::move(grouped.start);
+  topology.leaving = std::move(grouped.leaving);
+  const std::vector<std::uint32_t>& start = topology.leaving_start;
+  const std::vector<std::uint32_t>& leaving = topology.leaving;
+  const std::vector<std::uint32_t>& end = grouped.end;  // per entry of `leaving`: the vertex it runs to
   topology.opposite_corner.assign(corners, kNone);
   const std::size_t vertices = mesh.vertices.size();
   for (std::uint32_t u = 0; u < vertices; ++u) {
