@@ -158,12 +158,14 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     if (triangles < 2) break;
 
     progress.beginStage("level " + std::to_string(l + 1) + ": clusters", 0);
-    const FaceGraph graph = buildFaceGraph(level.mesh);
-    PartitionOptions partition_options;
-    partition_options.method = options.partitioner;
-    partition_options.clusters = clustersFor(options, l, triangles);
-    partition_options.seed = options.seed + static_cast<std::uint32_t>(l);
     if (options.repartition || l == 0) {
+      PartitionOptions partition_options;
+      partition_options.method = options.partitioner;
+      partition_options.clusters = clustersFor(options, l, triangles);
+      partition_options.seed = options.seed + static_cast<std::uint32_t>(l);
+      // The face graph lives only while the partition is made (at level 0 it is as large as
+      // the mesh itself).
+      const FaceGraph graph = buildFaceGraph(level.mesh);
       const std::vector<std::int32_t> regions = partitionRegions(options, level.mesh, l, partition_options.clusters);
       level.partition = partitionFaces(graph, partition_options, regions);
       if (options.regroup_clusters) level.partition = options.regroup_clusters(level.mesh, l, level.partition);

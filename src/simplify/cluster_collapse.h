@@ -38,13 +38,10 @@ inline std::uint32_t nextCorner(std::uint32_t corner) { return corner % 3 == 2 ?
 
 struct InputTopology {
   std::vector<std::uint32_t> opposite_corner;   // per corner: the other triangle's corner of that edge, or kNone
-  // The corners leaving each vertex, in corner order: leaving[leaving_start[v] ..
-  // leaving_start[v + 1]) (corner c runs from its vertex to the next corner's).
-  std::vector<std::uint32_t> leaving_start, leaving;
 };
 
-// Every corner's opposite and the corners leaving each vertex. Throws Error(Input) for an edge
-// in more than two triangles or run twice in the same direction.
+// Every corner's opposite. Throws Error(Input) for an edge in more than two triangles or run
+// twice in the same direction.
 InputTopology buildTopology(const TinMesh& mesh);
 
 // The level to simplify, as simplifyClusters prepared it.

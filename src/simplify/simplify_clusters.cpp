@@ -21,16 +21,6 @@ std::string edgeText(std::uint64_t key) {
   return "(" + std::to_string(key >> 32) + ", " + std::to_string(key & 0xffffffffu) + ")";
 }
 
-bool hasEdge(const TinMesh& mesh, const InputTopology& topology, std::uint32_t a, std::uint32_t b) {
-  const auto leavesTo = [&](std::uint32_t from, std::uint32_t to) {
-    for (std::uint32_t i = topology.leaving_start[from]; i < topology.leaving_start[from + 1]; ++i) {
-      if (mesh.triangle_indices[nextCorner(topology.leaving[i])] == to) return true;
-    }
-    return false;
-  };
-  return a < mesh.vertices.size() && b < mesh.vertices.size() && (leavesTo(a, b) || leavesTo(b, a));
-}
-
 void validateOptions(const SimplifyOptions& options) {
   if (!(options.edge_ratio > 0 && options.edge_ratio <= 1)) {
     throw Error(ErrorCode::Usage, "simplify: edge ratio " + std::to_string(options.edge_ratio) +
@@ -100,11 +90,9 @@ InputTopology buildTopology(const TinMesh& mesh) {
   const std::size_t corners = idx.size();
   TERRATILES_ASSERT(corners < kNone);
   InputTopology topology;
-  CornersLeaving grouped = cornersLeaving(mesh);
-  topology.leaving_start = std::move(grouped.start);
-  topology.leaving = std::move(grouped.leaving);
-  const std::vector<std::uint32_t>& start = topology.leaving_start;
-  const std::vector<std::uint32_t>& leaving = topology.leaving;
+  const CornersLeaving grouped = cornersLeaving(mesh);  // gone once the opposites are paired
+  const std::vector<std::uint32_t>& start = grouped.start;
+  const std::vector<std::uint32_t>& leaving = grouped.leaving;
   const std::vector<std::uint32_t>& end = grouped.end;  // per entry of `leaving`: the vertex it runs to
   topology.opposite_corner.assign(corners, kNone);
   const std::size_t vertices = mesh.vertices.size();
@@ -190,16 +178,26 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
 
   std::vector<std::uint64_t> constrained_keys;
   constrained_keys.reserve(constrained_edges.size());
-  for (const auto& edge : constrained_edges) {
-    const std::uint64_t key = edgeKey(edge[0], edge[1]);
-    if (edge[0] == edge[1] || !hasEdge(mesh, topology, edge[0], edge[1])) {
-      throw Error(ErrorCode::Input, "simplifyClusters: constrained edge (" + std::to_string(edge[0]) + ", " +
-                                        std::to_string(edge[1]) + ") is not an edge of the mesh");
-    }
-    constrained_keys.push_back(key);
-  }
+  for (const auto& edge : constrained_edges) constrained_keys.push_back(edgeKey(edge[0], edge[1]));
   std::sort(constrained_keys.begin(), constrained_keys.end());
   constrained_keys.erase(std::unique(constrained_keys.begin(), constrained_keys.end()), constrained_keys.end());
+  if (!constrained_keys.empty()) {
+    // Every constrained edge must be an edge of the mesh: one pass over the corners.
+    std::vector<std::uint8_t> found(constrained_keys.size(), 0);
+    for (std::uint32_t c = 0; c < mesh.triangle_indices.size(); ++c) {
+      const std::uint64_t key = edgeKey(mesh.triangle_indices[c], mesh.triangle_indices[nextCorner(c)]);
+      const auto it = std::lower_bound(constrained_keys.begin(), constrained_keys.end(), key);
+      if (it != constrained_keys.end() && *it == key) found[static_cast<std::size_t>(it - constrained_keys.begin())] = 1;
+    }
+    for (const auto& edge : constrained_edges) {
+      const std::uint64_t key = edgeKey(edge[0], edge[1]);
+      const auto it = std::lower_bound(constrained_keys.begin(), constrained_keys.end(), key);
+      if (edge[0] == edge[1] || !found[static_cast<std::size_t>(it - constrained_keys.begin())]) {
+        throw Error(ErrorCode::Input, "simplifyClusters: constrained edge (" + std::to_string(edge[0]) + ", " +
+                                          std::to_string(edge[1]) + ") is not an edge of the mesh");
+      }
+    }
+  }
 
   // Faces of each cluster, in input order (counting sort).
   const std::size_t clusters = static_cast<std::size_t>(std::max<std::int32_t>(cluster_count, 0));
@@ -228,28 +226,37 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
   // input vertex at the same input position in all of them.
   ClusterSimplification result;
   const std::size_t vertex_count = mesh.vertices.size();
-  std::vector<GridPoint> position = mesh.vertices;
-  std::vector<std::uint8_t> moved(vertex_count, 0), used(vertex_count, 0);
+  // Per input vertex: bit 1 moved (maybe removed after), bit 0 used by a triangle (survives).
+  std::vector<std::uint8_t> state(vertex_count, 0);
   std::size_t triangle_corners = 0;
   for (const ClusterOutput& out : outputs) {
-    for (const auto& [v, g] : out.moved) {
-      if (moved[v]) {
-        throw Error(ErrorCode::Internal, "simplifyClusters: vertex " + std::to_string(v) +
+    for (const auto& moved : out.moved) {
+      if (state[moved.first] & 2) {
+        throw Error(ErrorCode::Internal, "simplifyClusters: vertex " + std::to_string(moved.first) +
                                              " moved in two clusters; a shared vertex must be locked");
       }
-      moved[v] = 1;
-      position[v] = g;
+      state[moved.first] = 2;
     }
-    for (const std::uint32_t v : out.triangles) used[v] = 1;
     triangle_corners += out.triangles.size();
     result.refused_for_error += out.refused_for_error;
     result.refused_for_flip += out.refused_for_flip;
   }
+  for (const ClusterOutput& out : outputs) {
+    for (const std::uint32_t v : out.triangles) state[v] |= 1;
+  }
   result.new_index_of_vertex.assign(vertex_count, kRemovedVertex);
+  std::size_t survivors = 0;
   for (std::size_t v = 0; v < vertex_count; ++v) {
-    if (!used[v]) continue;
-    result.new_index_of_vertex[v] = static_cast<std::uint32_t>(result.mesh.vertices.size());
-    result.mesh.vertices.push_back(position[v]);
+    if (state[v] & 1) result.new_index_of_vertex[v] = static_cast<std::uint32_t>(survivors++);
+  }
+  result.mesh.vertices.resize(survivors);
+  for (std::size_t v = 0; v < vertex_count; ++v) {
+    if (state[v] & 1) result.mesh.vertices[result.new_index_of_vertex[v]] = mesh.vertices[v];
+  }
+  for (const ClusterOutput& out : outputs) {
+    for (const auto& [v, g] : out.moved) {
+      if (result.new_index_of_vertex[v] != kRemovedVertex) result.mesh.vertices[result.new_index_of_vertex[v]] = g;
+    }
   }
   result.mesh.triangle_indices.reserve(triangle_corners);
   result.cluster_of_face.reserve(triangle_corners / 3);
