@@ -51,7 +51,7 @@ struct LevelOptions {
   std::function<std::vector<std::int32_t>(const TinMesh&, std::size_t)> partition_regions;
   // The edge-collapse engine: CGAL's edge collapse (the default, the quality reference) or
   // native (terratiles' own over flat arrays, faster; simplify_clusters.h).
-  Simplifier simplifier = Simplifier::Cgal;
+  Simplifier simplifier = Simplifier::Native;
   // Target edge ratio of one simplification (paper: 0.5).
   double level_ratio = 0.5;
   // Error budget of level l (l >= 1): first_budget_m * level_error_growth^(l - 1); 0 or

@@ -46,7 +46,7 @@ struct BuildOptions {
   // METIS call per connected component over the whole level (slow; for comparison).
   bool global_partition = false;
   double level_ratio = 0.5;            // clusters: edges kept per simplification
-  Simplifier simplifier = Simplifier::Cgal;  // clusters: the edge-collapse engine
+  Simplifier simplifier = Simplifier::Native;  // clusters: the edge-collapse engine
   double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)
   std::string constraints;             // clusters: break lines (OGR file), or empty
   std::int32_t tile_cells = 128;       // grid: cells per tile side

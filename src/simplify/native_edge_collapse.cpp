@@ -76,9 +76,21 @@ struct ClusterArrays {
   // known), kept so that a collapse next to it recomputes only the collapses it changes, and
   // tried first when the vertex comes out of the queue.
   std::vector<Collapse> best;
+  // A vertex the filter refused since its star last changed (`refused` 1) waits in the queue
+  // at its next collapse: its collapses not tried yet, from the cheapest, are
+  // waiting[waiting_next[u] .. waiting_end[u]) (a pool for the cluster, compacted as it grows;
+  // a list is dropped when the star changes).
+  std::vector<std::uint8_t> refused;
+  std::vector<Collapse> waiting, waiting_kept;
+  std::vector<std::uint32_t> waiting_next, waiting_end;
   // The queue: a binary heap of free vertices by (best_cost, vertex), and each vertex's place
   // in it (kNone: not queued).
-  std::vector<std::uint32_t> heap, heap_place;
+  struct QueueEntry {
+    double cost;
+    std::uint32_t vertex;
+  };
+  std::vector<QueueEntry> heap;
+  std::vector<std::uint32_t> heap_place;
   std::vector<std::uint32_t> u_triangles, u_ring, v_triangles, v_ring, around;
   std::vector<Collapse> targets;  // the collapses of the vertex under way
   // Points placed on the globe, by their grid point's bits (direct-mapped): a vertex refused
@@ -329,55 +341,60 @@ class ClusterCollapser {
     }
   }
 
-  // The queue's order: cheapest collapse first, ties by vertex.
-  bool before(std::uint32_t p, std::uint32_t q) const {
-    return a_.best[p].cost != a_.best[q].cost ? a_.best[p].cost < a_.best[q].cost : p < q;
+  // The queue's order: cheapest collapse first, ties by vertex. The heap holds each vertex's
+  // cost beside it, so sifting reads the heap alone.
+  using QueueEntry = ClusterArrays::QueueEntry;
+  static bool before(const QueueEntry& p, const QueueEntry& q) {
+    return p.cost != q.cost ? p.cost < q.cost : p.vertex < q.vertex;
   }
-  void heapSet(std::size_t place, std::uint32_t u) {
-    a_.heap[place] = u;
-    a_.heap_place[u] = static_cast<std::uint32_t>(place);
+  void heapSet(std::size_t place, const QueueEntry& entry) {
+    a_.heap[place] = entry;
+    a_.heap_place[entry.vertex] = static_cast<std::uint32_t>(place);
   }
   void siftUp(std::size_t place) {
-    const std::uint32_t u = a_.heap[place];
+    const QueueEntry entry = a_.heap[place];
     while (place > 0) {
       const std::size_t parent = (place - 1) / 2;
-      if (!before(u, a_.heap[parent])) break;
+      if (!before(entry, a_.heap[parent])) break;
       heapSet(place, a_.heap[parent]);
       place = parent;
     }
-    heapSet(place, u);
+    heapSet(place, entry);
   }
   void siftDown(std::size_t place) {
-    const std::uint32_t u = a_.heap[place];
+    const QueueEntry entry = a_.heap[place];
     const std::size_t size = a_.heap.size();
     for (;;) {
       std::size_t child = 2 * place + 1;
       if (child >= size) break;
       if (child + 1 < size && before(a_.heap[child + 1], a_.heap[child])) ++child;
-      if (!before(a_.heap[child], u)) break;
+      if (!before(a_.heap[child], entry)) break;
       heapSet(place, a_.heap[child]);
       place = child;
     }
-    heapSet(place, u);
+    heapSet(place, entry);
   }
   // u's cheapest collapse changed: (re)place it in the queue.
   void queueAt(std::uint32_t u, const Collapse& cheapest) {
-    const double old = a_.best[u].cost;
     a_.best[u] = cheapest;
     const std::uint32_t place = a_.heap_place[u];
     if (place == kNone) {
-      a_.heap.push_back(u);
+      a_.heap.push_back({cheapest.cost, u});
       siftUp(a_.heap.size() - 1);
-    } else if (cheapest.cost <= old) {
+      return;
+    }
+    const double old = a_.heap[place].cost;
+    a_.heap[place].cost = cheapest.cost;
+    if (cheapest.cost <= old) {
       siftUp(place);
     } else {
       siftDown(place);
     }
   }
   std::uint32_t popCheapest() {
-    const std::uint32_t u = a_.heap.front();
+    const std::uint32_t u = a_.heap.front().vertex;
     a_.heap_place[u] = kNone;
-    const std::uint32_t last = a_.heap.back();
+    const QueueEntry last = a_.heap.back();
     a_.heap.pop_back();
     if (!a_.heap.empty()) {
       a_.heap[0] = last;
@@ -408,6 +425,7 @@ class ClusterCollapser {
   // `gathered`: u's star is in u_triangles and u_ring already.
   void enqueue(std::uint32_t u, bool gathered = false) {
     if (a_.locked[u] || a_.removed[u]) return;
+    a_.refused[u] = 0;  // its star changed: every collapse may be accepted now
     if (!gathered) gatherStar(u, a_.u_triangles, a_.u_ring);
     Collapse cheapest;
     cheapest.cost = std::numeric_limits<double>::infinity();
@@ -427,7 +445,7 @@ class ClusterCollapser {
   void requeueNextTo(std::uint32_t w, std::uint32_t u, std::uint32_t v) {
     if (a_.locked[w] || a_.removed[w]) return;
     const std::uint32_t target = a_.best[w].v;
-    if (target == kNone || target == u || target == v) {
+    if (target == kNone || target == u || target == v || a_.refused[w]) {
       enqueue(w);
       return;
     }
@@ -454,6 +472,10 @@ class ClusterCollapser {
       a_.generation = 1;
     }
     a_.best.assign(vertices, Collapse{});
+    a_.refused.assign(vertices, 0);
+    a_.waiting_next.resize(vertices);
+    a_.waiting_end.resize(vertices);
+    a_.waiting.clear();
     a_.heap.clear();
     a_.heap_place.assign(vertices, kNone);
     for (std::uint32_t u = 0; u < vertices; ++u) {
@@ -462,23 +484,59 @@ class ClusterCollapser {
     while (wantsMore() && !a_.heap.empty()) tryCollapse(popCheapest(), out);
   }
 
-  // Tries u's collapses from the cheapest (the one it was queued at, then the others in order);
-  // applies the first the filter accepts.
+  // Tries u's collapses from the cheapest (the one it was queued at, then the others in order)
+  // and applies the first the filter accepts, as long as it is not dearer than the next
+  // vertex's in the queue: then u waits in the queue at that collapse (greedy over all
+  // collapses, as CGAL's queue of edges, not only over vertices).
   bool tryCollapse(std::uint32_t u, ClusterOutput& out) {
     gatherStar(u, a_.u_triangles, a_.u_ring);
-    const Collapse first = a_.best[u];
-    if (accepts(u, first, out)) return true;
-    a_.targets.clear();
-    for (const std::uint32_t v : a_.u_ring) {
-      collapsesInto(u, v, true, [&](const Collapse& c) {
-        if (first < c || c < first) a_.targets.push_back(c);
-      });
+    if (!a_.refused[u]) {
+      const Collapse first = a_.best[u];
+      if (accepts(u, first, out)) return true;
+      a_.targets.clear();
+      for (const std::uint32_t v : a_.u_ring) {
+        collapsesInto(u, v, true, [&](const Collapse& c) {
+          if (first < c || c < first) a_.targets.push_back(c);
+        });
+      }
+      std::sort(a_.targets.begin(), a_.targets.end());
+      if (a_.waiting.size() + a_.targets.size() > a_.waiting.capacity()) compactWaiting();
+      a_.refused[u] = 1;
+      a_.waiting_next[u] = static_cast<std::uint32_t>(a_.waiting.size());
+      a_.waiting.insert(a_.waiting.end(), a_.targets.begin(), a_.targets.end());
+      a_.waiting_end[u] = static_cast<std::uint32_t>(a_.waiting.size());
     }
-    std::sort(a_.targets.begin(), a_.targets.end());
-    for (const Collapse& collapse : a_.targets) {
+    while (a_.waiting_next[u] < a_.waiting_end[u]) {
+      const Collapse collapse = a_.waiting[a_.waiting_next[u]];
+      if (!a_.heap.empty()) {
+        const std::uint32_t next = a_.heap.front().vertex;
+        const double next_cost = a_.heap.front().cost;
+        if (collapse.cost > next_cost || (collapse.cost == next_cost && next < u)) {
+          queueAt(u, collapse);
+          return false;
+        }
+      }
+      ++a_.waiting_next[u];
       if (accepts(u, collapse, out)) return true;
     }
     return false;  // not queued again until a collapse changes its star
+  }
+
+  // The waiting lists still in use, moved to the front of the pool; the pool doubles when
+  // they fill more than half of it.
+  void compactWaiting() {
+    a_.waiting_kept.clear();
+    const auto vertices = static_cast<std::uint32_t>(a_.refused.size());
+    for (std::uint32_t u = 0; u < vertices; ++u) {
+      if (!a_.refused[u] || a_.removed[u]) continue;
+      const std::uint32_t begin = a_.waiting_next[u], end = a_.waiting_end[u];
+      a_.waiting_next[u] = static_cast<std::uint32_t>(a_.waiting_kept.size());
+      a_.waiting_kept.insert(a_.waiting_kept.end(), a_.waiting.begin() + begin, a_.waiting.begin() + end);
+      a_.waiting_end[u] = static_cast<std::uint32_t>(a_.waiting_kept.size());
+    }
+    std::swap(a_.waiting, a_.waiting_kept);
+    const std::size_t wanted = std::max<std::size_t>(4096, 2 * (a_.waiting.size() + a_.targets.size()));
+    if (a_.waiting.capacity() < wanted) a_.waiting.reserve(wanted);
   }
 
   // Applies the collapse of u when the filter accepts it. Needs u's star gathered.

@@ -265,9 +265,9 @@ void addHeightOptions(CLI::App& command, std::string& heights, std::string& geoi
 }
 
 constexpr const char* kSimplifierHelp =
-    "Edge-collapse engine inside the clusters: cgal (CGAL's Surface_mesh_simplification: the quality reference) "
-    "or native (terratiles' own over flat arrays with the same quadrics, filter and greedy order: about 3x "
-    "faster; on SRTM Gabon the coarsest zoom's geometricError is 8 % larger)";
+    "Edge-collapse engine inside the clusters: native (terratiles' own over flat arrays with CGAL's quadrics, "
+    "filter and greedy order; the default: 1.5-3x faster on SRTM, per-zoom geometricError within +3.2 % of "
+    "CGAL's on the test rasters) or cgal (CGAL's Surface_mesh_simplification: the quality reference)";
 
 void addSimplifierOption(CLI::App& command, std::string& simplifier) {
   command.add_option("--simplifier", simplifier, kSimplifierHelp)
@@ -338,7 +338,7 @@ struct LevelsCommandOptions {
   double tin_max_error_m = 0.5;
   std::string partitioner = "metis";
   std::string partition_scope = "regional";
-  std::string simplifier = "cgal";
+  std::string simplifier = "native";
   double level_error_growth = 2;  // 0: no budget
   std::size_t random_constraints = 0;
   std::string constraints;  // break lines (OGR vector file), or empty
@@ -525,7 +525,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Error budget of a level: tin-max-error * G^level metres (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  std::string build_simplifier = "cgal";
+  std::string build_simplifier = "native";
   addSimplifierOption(*build_command, build_simplifier);
   build_command->add_option("--constraints", build.constraints, kConstraintsHelp);
   build_command
