@@ -142,16 +142,27 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
   FacePartition inherited;  // fixed borders: the clusters of the level just built
   for (std::size_t l = 0;; ++l) {
     Level& level = levels[l];
-    progress.beginStage("level " + std::to_string(l) + (options.measure ? ": measuring" : ": placing vertices"), 0);
-    if (options.globe) {
-      level.vertex_ecef.resize(level.mesh.vertices.size());
-      options.globe->place(level.mesh.vertices, {}, level.vertex_ecef);
-      if (options.measure) level.error = measureTin(*options.globe, level.mesh, level.vertex_ecef);
-    } else if (options.measure) {
-      level.error = measureTin(dem, level.mesh);
+    // The level's vertices on the globe, while it is measured and simplified: a level keeps
+    // none (DemOnGlobe::place finds a lattice vertex's point among the DEM's pixels, so
+    // whoever needs them later places them again for little), and a build, which measures its
+    // tiles instead, places them only after the partition, whose face graph and METIS
+    // workspace are the level's largest memory.
+    std::vector<EcefPoint> vertex_ecef;
+    const auto placeVertices = [&] {
+      vertex_ecef.resize(level.mesh.vertices.size());
+      options.globe->place(level.mesh.vertices, {}, vertex_ecef);
+    };
+    if (options.measure) {
+      progress.beginStage("level " + std::to_string(l) + ": measuring", 0);
+      if (options.globe) {
+        placeVertices();
+        level.error = measureTin(*options.globe, level.mesh, vertex_ecef);
+      } else {
+        level.error = measureTin(dem, level.mesh);
+      }
+      progress.endStage();
     }
     if (l == 0) level.edge_count = meshEdgeCount(level.mesh);  // coarser levels: counted below
-    progress.endStage();
     const std::size_t triangles = level.mesh.triangleCount();
     if (options.coarser_levels > 0 && l >= static_cast<std::size_t>(options.coarser_levels)) break;
     if (l > 0 && options.coarser_levels == 0 && levels[l - 1].partition.cluster_count == 1) break;
@@ -174,6 +185,11 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     }
     progress.endStage();
 
+    if (options.globe && vertex_ecef.empty()) {
+      progress.beginStage("level " + std::to_string(l) + ": placing vertices", 0);
+      placeVertices();
+      progress.endStage();
+    }
     progress.beginStage("level " + std::to_string(l + 1) + ": simplifying " +
                             std::to_string(level.partition.cluster_count) + " clusters", 0);
     SimplifyOptions simplify;
@@ -182,7 +198,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     simplify.metres_per_col = metres[0];
     simplify.metres_per_row = metres[1];
     simplify.globe = options.globe;
-    simplify.vertex_ecef = level.vertex_ecef;
+    simplify.vertex_ecef = vertex_ecef;
     Level next;
     if (options.first_budget_m > 0 && std::isfinite(options.first_budget_m)) {
       next.budget_m = options.first_budget_m * std::pow(options.level_error_growth, static_cast<double>(l));
@@ -221,8 +237,8 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     level.index_in_coarser = std::move(simplified.new_index_of_vertex);
     next.mesh = std::move(simplified.mesh);
     next.edge_count = edge_count;
-    next.inherited_partition = {simplified.cluster_of_face, level.partition.cluster_count};
-    inherited = {std::move(simplified.cluster_of_face), level.partition.cluster_count};
+    if (!options.repartition) inherited = {simplified.cluster_of_face, level.partition.cluster_count};
+    next.inherited_partition = {std::move(simplified.cluster_of_face), level.partition.cluster_count};
     next.refused_for_error = simplified.refused_for_error;
     next.refused_for_flip = simplified.refused_for_flip;
     levels.push_back(std::move(next));

@@ -93,8 +93,6 @@ struct Level {
   // Per vertex of this level: its index in the next coarser level, or kRemovedVertex.
   std::vector<std::uint32_t> index_in_coarser;
   TinErrorStatistics error;  // measured against the DEM (LevelOptions::measure)
-  // With LevelOptions::globe: every vertex placed on the globe (DemOnGlobe::place).
-  std::vector<EcefPoint> vertex_ecef;
   std::size_t edge_count = 0;
   double budget_m = 0;  // the error budget this level was simplified under (0: none)
   std::size_t refused_for_error = 0, refused_for_flip = 0;

@@ -342,8 +342,6 @@ struct ZoomContent {
   std::int32_t step = 0;      // grid: pixels between samples
   std::size_t clusters = 0;   // clusters: the level's own clusters
   const TinMesh* mesh = nullptr;
-  // The level's vertices on the globe (DemOnGlobe::place).
-  std::vector<EcefPoint> ecef;
   // Clusters: per vertex, its index in the next coarser zoom's mesh, or kRemovedVertex (the
   // locked vertices a tile outline runs along live on); nullptr on the coarsest zoom and for
   // the grid pyramid.
@@ -484,8 +482,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.zoom = level.zoom;
       content.step = level.step;
       content.mesh = &level.mesh;
-      content.ecef.resize(level.mesh.vertices.size());
-      globe.place(level.mesh.vertices, {}, content.ecef);
       content.tiles = std::move(level.tiles);
       zooms.push_back(std::move(content));
     }
@@ -519,8 +515,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     } else {
       levels.emplace_back();
       levels[0].mesh = std::move(finest.mesh);
-      levels[0].vertex_ecef.resize(levels[0].mesh.vertices.size());
-      globe.place(levels[0].mesh.vertices, {}, levels[0].vertex_ecef);
     }
     progress.beginStage("assigning clusters to tiles", levels.size());
     std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;
@@ -530,7 +524,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.zoom = zoom;
       content.clusters = static_cast<std::size_t>(levels[l].partition.cluster_count);
       content.mesh = &levels[l].mesh;
-      content.ecef = std::move(levels[l].vertex_ecef);
       if (l + 1 < levels.size()) content.index_in_coarser = &levels[l].index_in_coarser;
       FacePartition* map_clusters = !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
                                     : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
@@ -566,13 +559,29 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   std::size_t total_tiles = 0;
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
   progress.beginStage("writing tiles", total_tiles);
+  const std::size_t zoom_count = zooms.size();
+  // vertex_grid[k][v] (below): the zoom whose grid vertex v of zoom k snaps to, as a byte.
+  constexpr std::uint8_t kOwnGrid = 255;  // while the chain is followed: not inherited
+  TERRATILES_ASSERT(zoom_count < kOwnGrid);
+  // A zoom's vertices on the globe, placed when needed (for its widest tile, then for its
+  // tiles) instead of held for every zoom at once: placing a lattice vertex is a look-up.
+  const auto placedVertices = [&](const ZoomContent& zoom) {
+    std::vector<EcefPoint> ecef(zoom.mesh->vertices.size());
+    globe.place(zoom.mesh->vertices, {}, ecef);
+    return ecef;
+  };
+  // Each zoom's outline and widest tile on its own (zooms in parallel).
+  std::vector<std::vector<std::uint8_t>> outline(zoom_count);
+  std::vector<double> widest_m(zoom_count);
+  tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
+    outline[k] = outlineVertices(zooms[k]);
+    widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, placedVertices(zooms[k]));
+  });
   // The shared quantisation grid: --position-step, or the step at which the finest zoom's
   // widest tile takes --draco-position-bits.
   double base_step_m = options.position_step_m;
   if (options.draco_position_bits > 0) {
-    const ZoomContent& finest = zooms.back();
-    base_step_m =
-        sharedPositionStep(widestTileExtent(finest.tiles, *finest.mesh, finest.ecef), std::ldexp(1.0, -30), options.draco_position_bits);
+    base_step_m = sharedPositionStep(widest_m.back(), std::ldexp(1.0, -30), options.draco_position_bits);
   }
   summary.position_step_m = base_step_m;
 
@@ -583,43 +592,36 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   // the coarser of the two grids in both, and so on down the chain of outlines: every vertex
   // two touching tiles share decodes to the same position in both, whatever grid each zoom
   // uses. Every error is measured after this snap, on what the GLBs decode to.
-  const std::size_t zoom_count = zooms.size();
   std::vector<double> zoom_step_m(zoom_count);
-  std::vector<std::vector<double>> vertex_step_m(zoom_count);
-  {
-    // Each zoom's outline and widest tile on its own (zooms in parallel), then the chain.
-    std::vector<std::vector<std::uint8_t>> outline(zoom_count);
-    std::vector<double> widest_m(zoom_count);
-    tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
-      outline[k] = outlineVertices(zooms[k]);
-      widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, zooms[k].ecef);
-    });
-    for (std::size_t k = 0; k < zoom_count; ++k) {
-      const ZoomContent& zoom = zooms[k];
-      std::vector<double>& steps = vertex_step_m[k];
-      steps.assign(zoom.mesh->vertices.size(), 0.0);  // the inherited steps first
-      double largest_inherited = 0;
-      if (k > 0) {
-        const ZoomContent& coarser = zooms[k - 1];
-        const std::vector<std::uint8_t>& coarser_outline = outline[k - 1];
-        const std::vector<std::uint32_t>* map = zoom.index_in_coarser;
-        for (std::size_t v = 0; map && v < steps.size(); ++v) {
-          const std::uint32_t w = (*map)[v];
-          if (!outline[k][v] || w == kRemovedVertex || !coarser_outline[w]) continue;
-          const GridPoint& here = zoom.mesh->vertices[v];
-          const GridPoint& there = coarser.mesh->vertices[w];
-          if (here.col != there.col || here.row != there.row || here.height_m != there.height_m) continue;
-          steps[v] = vertex_step_m[k - 1][w];
-          largest_inherited = std::max(largest_inherited, steps[v]);
-        }
+  std::vector<std::vector<std::uint8_t>> vertex_grid(zoom_count);
+  for (std::size_t k = 0; k < zoom_count; ++k) {
+    const ZoomContent& zoom = zooms[k];
+    std::vector<std::uint8_t>& grid = vertex_grid[k];
+    grid.assign(zoom.mesh->vertices.size(), kOwnGrid);  // the inherited grids first
+    double largest_inherited = 0;
+    if (k > 0) {
+      const ZoomContent& coarser = zooms[k - 1];
+      const std::vector<std::uint8_t>& coarser_outline = outline[k - 1];
+      const std::vector<std::uint32_t>* map = zoom.index_in_coarser;
+      for (std::size_t v = 0; map && v < grid.size(); ++v) {
+        const std::uint32_t w = (*map)[v];
+        if (!outline[k][v] || w == kRemovedVertex || !coarser_outline[w]) continue;
+        const GridPoint& here = zoom.mesh->vertices[v];
+        const GridPoint& there = coarser.mesh->vertices[w];
+        if (here.col != there.col || here.row != there.row || here.height_m != there.height_m) continue;
+        grid[v] = vertex_grid[k - 1][w];
+        largest_inherited = std::max(largest_inherited, zoom_step_m[grid[v]]);
       }
-      // A coarser snap moves a vertex by up to half that step: room for it in the extent.
-      zoom_step_m[k] = sharedPositionStep(widest_m[k] + 2 * largest_inherited, base_step_m, kMaxExactPositionBits);
-      for (double& step : steps) step = std::max(zoom_step_m[k], step);
-      if (k > 0) outline[k - 1] = std::vector<std::uint8_t>();  // the chain needs only the last two
     }
-    for (std::size_t l = 0; l < levels.size(); ++l) levels[l].index_in_coarser = std::vector<std::uint32_t>();
+    // A coarser snap moves a vertex by up to half that step: room for it in the extent.
+    zoom_step_m[k] = sharedPositionStep(widest_m[k] + 2 * largest_inherited, base_step_m, kMaxExactPositionBits);
+    for (std::uint8_t& g : grid) {
+      if (g == kOwnGrid || zoom_step_m[g] < zoom_step_m[k]) g = static_cast<std::uint8_t>(k);
+    }
+    if (k > 0) outline[k - 1] = std::vector<std::uint8_t>();  // the chain needs only the last two
   }
+  outline = {};
+  for (std::size_t l = 0; l < levels.size(); ++l) levels[l].index_in_coarser = std::vector<std::uint32_t>();
 
   double widest_step_m = 0;
   std::vector<ZoomSummary> zoom_summaries(zoom_count);
@@ -635,39 +637,52 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     double largest_step_m = 0;
   };
   const auto zoomVertices = [&](std::size_t k) {
-    ZoomContent& level = zooms[k];
+    const ZoomContent& level = zooms[k];
     ZoomVertices out;
-    out.normals = levelNormals(*level.mesh, level.ecef);
-    out.snapped = std::move(level.ecef);
-    level.ecef = {};
+    out.snapped = placedVertices(level);
+    out.normals = levelNormals(*level.mesh, out.snapped);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.snapped.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                         for (std::size_t v = range.begin(); v < range.end(); ++v) {
-                          const double step = vertex_step_m[k][v];
+                          const double step = zoom_step_m[vertex_grid[k][v]];
                           EcefPoint& p = out.snapped[v];
                           p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
                         }
                       });
-    out.largest_step_m =
-        vertex_step_m[k].empty() ? 0.0 : *std::max_element(vertex_step_m[k].begin(), vertex_step_m[k].end());
-    vertex_step_m[k] = std::vector<double>();
+    for (const std::uint8_t g : vertex_grid[k]) out.largest_step_m = std::max(out.largest_step_m, zoom_step_m[g]);
+    vertex_grid[k] = std::vector<std::uint8_t>();
     return out;
   };
   std::vector<GlbOptions> zoom_glb(zoom_count, glb);
   const PixelBoxes boxes(globe);
   tbb::enumerable_thread_specific<ContentScratch> content_scratch;
-  // In the background: the next coarser zoom's vertices while a zoom's tiles are made; a
+  // A zoom written, drawn and measured: its mesh, tiles' faces and clusters are let go, so
+  // that the finest zooms' memory serves the coarser ones (the tile keys stay for the tileset).
+  const auto releaseZoom = [&](std::size_t k) {
+    for (PyramidTile& tile : zooms[k].tiles) tile.faces = std::vector<std::uint32_t>();
+    zooms[k].mesh = nullptr;
+    zooms[k].map_clusters = nullptr;
+    if (options.lod == LodMethod::Grid) {
+      pyramid.levels[k].mesh = TinMesh();
+    } else {
+      Level& level = levels[zoom_count - 1 - k];
+      level.mesh = TinMesh();
+      level.partition = FacePartition();
+      level.inherited_partition = FacePartition();
+    }
+  };
+  // In the background: the next coarser zoom's vertices while a zoom's files are written; a
   // zoom's files (one zoom after the other, in tile order) and its RMS error and maps while
   // the next is made. Declared after everything their tasks use: their destructors wait.
   tbb::task_group preparing, writing, finishing;
   try {
     // Finest zoom first: a tile's geometricError covers its difference to the finer zoom's
     // drawn surface (where a viewer draws both), measured on that zoom's surface. Two
-    // surfaces' memory, taken in turn.
+    // surfaces' memory, taken in turn (the second from the second zoom on, when the finest
+    // zoom's vertices are gone).
     ZoomVertices vertices = zoomVertices(zoom_count - 1), coarser_vertices;
-    std::array<ZoomSurface, 2> surfaces{ZoomSurface(dem.pixelCount()), ZoomSurface(dem.pixelCount())};
+    std::array<ZoomSurface, 2> surfaces;
     for (std::size_t k = zoom_count; k-- > 0;) {
-      if (k > 0) preparing.run([&, k] { coarser_vertices = zoomVertices(k - 1); });
       const ZoomContent& level = zooms[k];
       zoom_glb[k].position_step_m = zoom_step_m[k];
       widest_step_m = std::max(widest_step_m, zoom_step_m[k]);
@@ -676,7 +691,11 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       const double shift_m = 0.87 * vertices.largest_step_m;
       // The zoom two finer was the last to use this memory (its maps are drawn by now).
       ZoomSurface& surface = surfaces[k % 2];
-      surface.clear();
+      if (surface.empty()) {
+        surface = ZoomSurface(dem.pixelCount());
+      } else {
+        surface.clear();
+      }
       const ZoomSurface* finer = k + 1 < zoom_count ? &surfaces[(k + 1) % 2] : nullptr;
       ZoomSummary& zoom_summary = zoom_summaries[k];
       zoom_summary.position_step_m = zoom_step_m[k];
@@ -711,6 +730,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         zoom_summary.max_error_m = std::max(zoom_summary.max_error_m, tile.measure.max_error_m);
         zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile.position_bits);
       }
+      vertices = {};
+      if (k > 0) preparing.run([&, k] { coarser_vertices = zoomVertices(k - 1); });
       writing.wait();  // the finer zoom's files
       writing.run([&, k] {
         ZoomSummary& written_summary = zoom_summaries[k];
@@ -721,6 +742,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         }
       });
       finishing.wait();  // the finer zoom's: done with its surface, which the next zoom takes
+      if (k + 1 < zoom_count) releaseZoom(k + 1);
       finishing.run([&, k] {
         const ZoomSurface& drawn = surfaces[k % 2];
         ZoomSummary& finished_summary = zoom_summaries[k];

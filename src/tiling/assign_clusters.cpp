@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <set>
 #include <string>
@@ -195,7 +196,7 @@ TileBounds boundsOf(const std::vector<std::array<double, 2>>& points) {
 
 // The tiles each face's bounding box (in scheme coordinates) shares area with, as CSR.
 struct FaceTiles {
-  std::vector<std::size_t> offset;
+  std::vector<std::uint32_t> offset;
   std::vector<TileKey> tiles;
 };
 
@@ -219,18 +220,20 @@ FaceTiles faceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vect
         box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
       }
       for (const TileKey& key : frame.tilesIntersecting(box, zoom)) part.tiles.push_back(key);
-      part.offset.push_back(part.tiles.size());  // this face's end within the block
+      part.offset.push_back(static_cast<std::uint32_t>(part.tiles.size()));  // this face's end within the block
     }
   });
   FaceTiles out;
   out.offset.assign(face_count + 1, 0);
   std::size_t total = 0;
   for (const FaceTiles& part : parts) total += part.tiles.size();
+  TERRATILES_ASSERT(total <= std::numeric_limits<std::uint32_t>::max());  // (the input's size limit keeps it far below)
   out.tiles.reserve(total);
   for (std::size_t b = 0; b < blocks; ++b) {
-    const std::size_t base = out.tiles.size();
+    const auto base = static_cast<std::uint32_t>(out.tiles.size());
     for (std::size_t i = 0; i < parts[b].offset.size(); ++i) out.offset[b * kBlock + i + 1] = base + parts[b].offset[i];
     out.tiles.insert(out.tiles.end(), parts[b].tiles.begin(), parts[b].tiles.end());
+    parts[b] = FaceTiles();  // joined: its memory serves the next blocks
   }
   return out;
 }
@@ -390,7 +393,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
   const auto corner = [&](std::size_t f, int k) { return scheme[idx[3 * f + static_cast<std::size_t>(k)]]; };
 
   const FaceTiles face_tiles_csr = faceTiles(frame, mesh, scheme, zoom);
-  const std::vector<std::size_t>& tile_offset = face_tiles_csr.offset;
+  const std::vector<std::uint32_t>& tile_offset = face_tiles_csr.offset;
   const std::vector<TileKey>& face_tiles = face_tiles_csr.tiles;
 
   // Own clusters: the tile of each one's centroid.

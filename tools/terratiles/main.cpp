@@ -1,7 +1,18 @@
 #include <iostream>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 #include "tools/terratiles/run_cli.h"
 
 int main(int argc, char** argv) {
+#if defined(__GLIBC__)
+  // One malloc arena for every thread. glibc gives each TBB worker an arena of its own, and
+  // what a worker frees (per-cluster and per-tile arrays) stays in that arena, out of reach of
+  // the others: on SRTM Gabon that held the build's peak resident set about 50 MB (12 %)
+  // higher, with no measurable gain in speed on two cores.
+  mallopt(M_ARENA_MAX, 1);
+#endif
   return terratiles::runCli(std::vector<std::string>(argv, argv + argc), std::cin, std::cout, std::cerr);
 }
