@@ -66,6 +66,9 @@ struct ClusterOutput {
   std::vector<std::pair<std::uint32_t, GridPoint>> moved;  // surviving vertices that moved
   // The native engine, for a part of a split cluster: every surviving vertex's quadric.
   std::vector<std::pair<std::uint32_t, Quadric>> quadrics;
+  // The native engine, for a part of a split cluster: the surviving free vertices whose every
+  // collapse the filter refused since their star last changed (input vertex indices).
+  std::vector<std::uint32_t> exhausted;
   std::size_t refused_for_error = 0;
   std::size_t refused_for_flip = 0;
 };

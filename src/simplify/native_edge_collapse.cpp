@@ -125,7 +125,11 @@ struct ClusterSetup {
   double edge_ratio = 0;              // the stop rule's ratio (0: SimplifyOptions::edge_ratio)
   std::size_t initial_edges = 0;      // the stop rule's initial count (0: the cluster's own)
   const std::vector<Quadric>* quadrics = nullptr;  // per input vertex, instead of its faces' planes
-  bool keep_quadrics = false;         // hand every survivor's quadric to the output
+  bool keep_quadrics = false;         // hand every survivor's quadric (and the exhausted vertices) to the output
+  // Per input vertex, 1: every collapse of it was refused in its part and its star has not
+  // changed since (nor has any neighbour been freed): not queued until a collapse changes its
+  // star, as if refused here (the filter would refuse the same collapses again).
+  const std::vector<std::uint8_t>* settled = nullptr;
 };
 
 class ClusterCollapser {
@@ -136,9 +140,11 @@ class ClusterCollapser {
   ClusterOutput simplify(std::int32_t cluster, const std::uint32_t* faces_begin, const std::uint32_t* faces_end,
                          const ClusterSetup& setup = {}) {
     edge_ratio_ = setup.edge_ratio > 0 ? setup.edge_ratio : options_.edge_ratio;
+    settled_ = setup.settled;
     load(cluster, faces_begin, faces_end, setup);
     ClusterOutput out;
-    if (edge_ratio_ < 1) collapse(out);
+    const bool collapsed = edge_ratio_ < 1;
+    if (collapsed) collapse(out);
     out.triangles.reserve(3 * live_triangles_);
     const std::size_t triangles = a_.alive.size();
     for (std::size_t t = 0; t < triangles; ++t) {
@@ -157,6 +163,7 @@ class ClusterCollapser {
       for (std::size_t l = 0; l < a_.identity.size(); ++l) {
         if (a_.removed[l]) continue;
         out.quadrics.emplace_back(a_.identity[l], a_.quadric[l]);
+        if (collapsed && !a_.locked[l] && a_.refused[l] && a_.heap_place[l] == kNone) out.exhausted.push_back(a_.identity[l]);
       }
     }
     for (const std::uint32_t v : a_.identity) a_.local_of_vertex[v] = kNone;
@@ -479,7 +486,13 @@ class ClusterCollapser {
     a_.heap.clear();
     a_.heap_place.assign(vertices, kNone);
     for (std::uint32_t u = 0; u < vertices; ++u) {
-      if (a_.star_start[u] != a_.star_start[u + 1]) enqueue(u);
+      if (a_.star_start[u] == a_.star_start[u + 1]) continue;
+      if (settled_ && (*settled_)[a_.identity[u]]) {
+        a_.refused[u] = 1;
+        a_.waiting_next[u] = a_.waiting_end[u] = 0;
+        continue;
+      }
+      enqueue(u);
     }
     while (wantsMore() && !a_.heap.empty()) tryCollapse(popCheapest(), out);
   }
@@ -685,6 +698,7 @@ class ClusterCollapser {
   ClusterArrays& a_;
   std::size_t edges_ = 0, initial_edges_ = 0, live_triangles_ = 0;
   double edge_ratio_ = 0.5;
+  const std::vector<std::uint8_t>* settled_ = nullptr;
   GridPoint origin_;
 };
 
@@ -865,6 +879,7 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
         now.triangle_indices.push_back(local[v]);
       }
     }
+    std::vector<std::uint8_t> settled(identity.size(), 0);
     for (const std::uint32_t unit : units_of_split[c]) {
       const ClusterOutput& part = unit_outputs[unit];
       for (const auto& [v, g] : part.moved) {
@@ -873,6 +888,15 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
       for (const auto& [v, q] : part.quadrics) {
         if (local[v] != kNone) addTo(quadric[local[v]], q);
       }
+      for (const std::uint32_t v : part.exhausted) {
+        if (local[v] != kNone) settled[local[v]] = 1;
+      }
+    }
+    // A vertex next to a seam (locked in the parts, free now) has new collapses: not settled.
+    for (std::size_t corner = 0; corner < now.triangle_indices.size(); corner += 3) {
+      const std::uint32_t* t = &now.triangle_indices[corner];
+      const auto seam = [&](std::uint32_t l) { return locked_units[identity[l]] && !locked[identity[l]]; };
+      if (seam(t[0]) || seam(t[1]) || seam(t[2])) settled[t[0]] = settled[t[1]] = settled[t[2]] = 0;
     }
     const InputTopology topology = buildTopology(now);
     std::vector<EcefPoint> ecef;
@@ -902,6 +926,7 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
     setup.initial_edges = edgesOf(in, static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
                                   faces_by_cluster.data() + cluster_start[c + 1]);
     setup.quadrics = &quadric;
+    setup.settled = &settled;
     ClusterCollapser collapser(again, now_locked, per_thread.local());
     ClusterOutput result = collapser.simplify(0, all_faces.data(), all_faces.data() + all_faces.size(), setup);
     out.refused_for_error += result.refused_for_error;
