@@ -61,14 +61,27 @@ struct LevelInput {
 // A symmetric 4x4 quadric (Garland and Heckbert): xx xy xz xw yy yz yw zz zw ww.
 using Quadric = std::array<double, 10>;
 
+// A collapse of a vertex into its neighbour `into` (an input vertex), as the native engine
+// computes it again from the two ends (their quadrics and places): `into` stays where it is,
+// or moves to the edge's quadric optimum or to the least point of the segment.
+struct UntriedCollapse {
+  enum : std::uint8_t { kStays, kOptimum, kOnEdge };
+  std::uint32_t into = kNone;
+  std::uint8_t placement = kStays;
+};
+
 struct ClusterOutput {
   std::vector<std::uint32_t> triangles;                    // input vertex indices, 3 per triangle
   std::vector<std::pair<std::uint32_t, GridPoint>> moved;  // surviving vertices that moved
   // The native engine, for a part of a split cluster: every surviving vertex's quadric.
   std::vector<std::pair<std::uint32_t, Quadric>> quadrics;
-  // The native engine, for a part of a split cluster: the surviving free vertices whose every
-  // collapse the filter refused since their star last changed (input vertex indices).
-  std::vector<std::uint32_t> exhausted;
+  // The native engine, for a part of a split cluster: the surviving free vertices the filter
+  // refused since their star last changed (input vertex indices), each with the collapses it
+  // has not tried yet, cheapest first (none: it refused every way):
+  // untried[untried_start[i] .. untried_start[i + 1]) are refused_vertices[i]'s.
+  std::vector<std::uint32_t> refused_vertices;
+  std::vector<std::uint32_t> untried_start;
+  std::vector<UntriedCollapse> untried;
   std::size_t refused_for_error = 0;
   std::size_t refused_for_flip = 0;
 };

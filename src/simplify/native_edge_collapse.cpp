@@ -48,7 +48,8 @@ constexpr double kEndSnapPx = 0.01;
 struct Collapse {
   double cost = 0;
   std::uint32_t v = kNone;
-  bool moves = false;  // both ends free: v moves to `placed` (the quadric optimum)
+  bool moves = false;    // both ends free: v moves to `placed` (the quadric optimum)
+  bool on_edge = false;  // moves to the segment's least point instead (segmentOptimum)
   GridPoint placed;
   bool operator<(const Collapse& other) const {
     return cost != other.cost ? cost < other.cost : v != other.v ? v < other.v : moves < other.moves;
@@ -125,11 +126,15 @@ struct ClusterSetup {
   double edge_ratio = 0;              // the stop rule's ratio (0: SimplifyOptions::edge_ratio)
   std::size_t initial_edges = 0;      // the stop rule's initial count (0: the cluster's own)
   const std::vector<Quadric>* quadrics = nullptr;  // per input vertex, instead of its faces' planes
-  bool keep_quadrics = false;         // hand every survivor's quadric (and the exhausted vertices) to the output
-  // Per input vertex, 1: every collapse of it was refused in its part and its star has not
-  // changed since (nor has any neighbour been freed): not queued until a collapse changes its
-  // star, as if refused here (the filter would refuse the same collapses again).
-  const std::vector<std::uint8_t>* settled = nullptr;
+  bool keep_quadrics = false;         // hand every survivor's quadric (and the refused vertices) to the output
+  // Per input vertex, kNone or an index into `untried_start`: the filter refused the vertex in
+  // its part and its star has not changed since (nor has any neighbour been freed). It starts
+  // as refused here, waiting at the collapses it had not tried yet
+  // (untried[untried_start[i] .. untried_start[i + 1]), `into` an input vertex): the filter
+  // would refuse the others again.
+  const std::vector<std::uint32_t>* refused_in_part = nullptr;
+  const std::vector<std::uint32_t>* untried_start = nullptr;
+  const std::vector<UntriedCollapse>* untried = nullptr;
 };
 
 class ClusterCollapser {
@@ -140,7 +145,7 @@ class ClusterCollapser {
   ClusterOutput simplify(std::int32_t cluster, const std::uint32_t* faces_begin, const std::uint32_t* faces_end,
                          const ClusterSetup& setup = {}) {
     edge_ratio_ = setup.edge_ratio > 0 ? setup.edge_ratio : options_.edge_ratio;
-    settled_ = setup.settled;
+    setup_ = &setup;
     load(cluster, faces_begin, faces_end, setup);
     ClusterOutput out;
     const bool collapsed = edge_ratio_ < 1;
@@ -163,10 +168,20 @@ class ClusterCollapser {
       for (std::size_t l = 0; l < a_.identity.size(); ++l) {
         if (a_.removed[l]) continue;
         out.quadrics.emplace_back(a_.identity[l], a_.quadric[l]);
-        if (collapsed && !a_.locked[l] && a_.refused[l] && a_.heap_place[l] == kNone) out.exhausted.push_back(a_.identity[l]);
+        if (!collapsed || a_.locked[l] || !a_.refused[l]) continue;
+        out.refused_vertices.push_back(a_.identity[l]);
+        out.untried_start.push_back(static_cast<std::uint32_t>(out.untried.size()));
+        for (std::uint32_t i = a_.waiting_next[l]; i < a_.waiting_end[l]; ++i) {
+          const Collapse& c = a_.waiting[i];
+          out.untried.push_back({a_.identity[c.v], static_cast<std::uint8_t>(c.on_edge ? UntriedCollapse::kOnEdge
+                                                                             : c.moves ? UntriedCollapse::kOptimum
+                                                                                       : UntriedCollapse::kStays)});
+        }
       }
+      out.untried_start.push_back(static_cast<std::uint32_t>(out.untried.size()));
     }
     for (const std::uint32_t v : a_.identity) a_.local_of_vertex[v] = kNone;
+    setup_ = nullptr;
     return out;
   }
 
@@ -258,7 +273,7 @@ class ClusterCollapser {
   // u -> v with v moved to g, at the cost of the edge's quadric q there.
   Collapse movedTo(const Quadric& q, std::uint32_t v, const GridPoint& g) const {
     const auto m = metresOf(g);
-    return {std::max(0.0, evaluate(q, m[0], m[1], m[2])), v, true, g};
+    return {std::max(0.0, evaluate(q, m[0], m[1], m[2])), v, true, false, g};
   }
 
   // Both ends free: the point of segment uv where the edge's quadric is least (CGAL's
@@ -271,8 +286,10 @@ class ClusterCollapser {
     if (!t) return {};
     const GridPoint& g0 = a_.grid[v];
     const GridPoint& g1 = a_.grid[u];
-    return movedTo(q, v, {g0.col + *t * (g1.col - g0.col), g0.row + *t * (g1.row - g0.row),
-                          g0.height_m + *t * (g1.height_m - g0.height_m)});
+    Collapse on_edge = movedTo(q, v, {g0.col + *t * (g1.col - g0.col), g0.row + *t * (g1.row - g0.row),
+                                      g0.height_m + *t * (g1.height_m - g0.height_m)});
+    on_edge.on_edge = true;
+    return on_edge;
   }
 
   // quadricOptimum(q, u, v), remembered for the edge uv until a collapse changes u or v.
@@ -286,7 +303,7 @@ class ClusterCollapser {
       entry = {lo, hi, a_.version[lo], a_.version[hi], a_.generation, optimum.moves, optimum.cost, optimum.placed};
     }
     Collapse collapse;
-    if (entry.moves) collapse = {entry.cost, v, true, entry.placed};
+    if (entry.moves) collapse = {entry.cost, v, true, false, entry.placed};
     return collapse;
   }
 
@@ -410,6 +427,12 @@ class ClusterCollapser {
     return u;
   }
 
+  // u -> v, v where it is.
+  Collapse stays(const Quadric& q, std::uint32_t v) const {
+    const auto& p = a_.metres[v];
+    return {std::max(0.0, evaluate(q, p[0], p[1], p[2])), v, false, false, a_.grid[v]};
+  }
+
   // The collapses of u into its neighbour v, passed to add: u -> v (v stays where it is),
   // and with v free too, v moved to the edge's quadric optimum and to the best point of the
   // segment uv (when they exist). The segment's point costs at least the optimum (the
@@ -418,8 +441,7 @@ class ClusterCollapser {
   template <typename Add>
   void collapsesInto(std::uint32_t u, std::uint32_t v, bool all, Add&& add) {
     const Quadric q = combined(u, v);
-    const auto& p = a_.metres[v];
-    add(Collapse{std::max(0.0, evaluate(q, p[0], p[1], p[2])), v, false, a_.grid[v]});
+    add(stays(q, v));
     if (a_.locked[v]) return;
     const Collapse moved = cachedOptimum(q, u, v);
     if (moved.moves) add(moved);
@@ -487,14 +509,33 @@ class ClusterCollapser {
     a_.heap_place.assign(vertices, kNone);
     for (std::uint32_t u = 0; u < vertices; ++u) {
       if (a_.star_start[u] == a_.star_start[u + 1]) continue;
-      if (settled_ && (*settled_)[a_.identity[u]]) {
-        a_.refused[u] = 1;
-        a_.waiting_next[u] = a_.waiting_end[u] = 0;
-        continue;
+      if (setup_->refused_in_part) {
+        const std::uint32_t i = (*setup_->refused_in_part)[a_.identity[u]];
+        if (i != kNone) {
+          waitAtUntried(u, (*setup_->untried_start)[i], (*setup_->untried_start)[i + 1]);
+          continue;
+        }
       }
       enqueue(u);
     }
     while (wantsMore() && !a_.heap.empty()) tryCollapse(popCheapest(), out);
+  }
+
+  // u starts as the filter left it in its part (ClusterSetup::refused_in_part): refused,
+  // waiting at the collapses it had not tried, untried[begin .. end).
+  void waitAtUntried(std::uint32_t u, std::uint32_t begin, std::uint32_t end) {
+    a_.refused[u] = 1;
+    a_.waiting_next[u] = static_cast<std::uint32_t>(a_.waiting.size());
+    for (std::uint32_t i = begin; i < end; ++i) {
+      const UntriedCollapse& c = (*setup_->untried)[i];
+      const std::uint32_t v = a_.local_of_vertex[c.into];
+      const Quadric q = combined(u, v);
+      a_.waiting.push_back(c.placement == UntriedCollapse::kStays     ? stays(q, v)
+                           : c.placement == UntriedCollapse::kOptimum ? cachedOptimum(q, u, v)
+                                                                      : segmentOptimum(q, u, v));
+    }
+    a_.waiting_end[u] = static_cast<std::uint32_t>(a_.waiting.size());
+    if (begin < end) queueAt(u, a_.waiting[a_.waiting_next[u]]);
   }
 
   // Tries u's collapses from the cheapest (the one it was queued at, then the others in order)
@@ -698,7 +739,7 @@ class ClusterCollapser {
   ClusterArrays& a_;
   std::size_t edges_ = 0, initial_edges_ = 0, live_triangles_ = 0;
   double edge_ratio_ = 0.5;
-  const std::vector<std::uint8_t>* settled_ = nullptr;
+  const ClusterSetup* setup_ = nullptr;
   GridPoint origin_;
 };
 
@@ -708,8 +749,10 @@ class ClusterCollapser {
 // bisection of the faces' centroids. The parts run in parallel with the seams between them
 // locked, each to kPartSlack more than the cluster's edge ratio; then the whole cluster runs
 // again from their result, seams free, with every vertex's accumulated quadric, to the
-// cluster's own stop: its greedy order takes the seams' dense collapses first. Which clusters
-// split depends on the level alone, not on the threads.
+// cluster's own stop: its greedy order takes the seams' dense collapses first. A vertex away
+// from the seams that the filter refused in its part starts the whole run where its part left
+// it (refused, waiting at the collapses it had not tried), instead of trying the refused ones
+// again. Which clusters split depends on the level alone, not on the threads.
 constexpr std::size_t kSplitShare = 8;
 constexpr std::size_t kMinSplitFaces = 8192;
 constexpr double kPartSlack = 0.05;
@@ -879,7 +922,10 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
         now.triangle_indices.push_back(local[v]);
       }
     }
-    std::vector<std::uint8_t> settled(identity.size(), 0);
+    // The vertices the filter refused in their part, with the collapses they had not tried
+    // (their ends as now's vertices).
+    std::vector<std::uint32_t> refused_in_part(identity.size(), kNone), untried_start{0};
+    std::vector<UntriedCollapse> untried;
     for (const std::uint32_t unit : units_of_split[c]) {
       const ClusterOutput& part = unit_outputs[unit];
       for (const auto& [v, g] : part.moved) {
@@ -888,15 +934,23 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
       for (const auto& [v, q] : part.quadrics) {
         if (local[v] != kNone) addTo(quadric[local[v]], q);
       }
-      for (const std::uint32_t v : part.exhausted) {
-        if (local[v] != kNone) settled[local[v]] = 1;
+      for (std::size_t i = 0; i < part.refused_vertices.size(); ++i) {
+        const std::uint32_t v = part.refused_vertices[i];
+        if (local[v] == kNone) continue;
+        refused_in_part[local[v]] = static_cast<std::uint32_t>(untried_start.size() - 1);
+        for (std::uint32_t j = part.untried_start[i]; j < part.untried_start[i + 1]; ++j) {
+          UntriedCollapse collapse = part.untried[j];
+          collapse.into = local[collapse.into];
+          untried.push_back(collapse);
+        }
+        untried_start.push_back(static_cast<std::uint32_t>(untried.size()));
       }
     }
-    // A vertex next to a seam (locked in the parts, free now) has new collapses: not settled.
+    // A vertex next to a seam (locked in the parts, free now) has new collapses: queued afresh.
     for (std::size_t corner = 0; corner < now.triangle_indices.size(); corner += 3) {
       const std::uint32_t* t = &now.triangle_indices[corner];
       const auto seam = [&](std::uint32_t l) { return locked_units[identity[l]] && !locked[identity[l]]; };
-      if (seam(t[0]) || seam(t[1]) || seam(t[2])) settled[t[0]] = settled[t[1]] = settled[t[2]] = 0;
+      if (seam(t[0]) || seam(t[1]) || seam(t[2])) refused_in_part[t[0]] = refused_in_part[t[1]] = refused_in_part[t[2]] = kNone;
     }
     const InputTopology topology = buildTopology(now);
     std::vector<EcefPoint> ecef;
@@ -926,7 +980,9 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
     setup.initial_edges = edgesOf(in, static_cast<std::int32_t>(c), faces_by_cluster.data() + cluster_start[c],
                                   faces_by_cluster.data() + cluster_start[c + 1]);
     setup.quadrics = &quadric;
-    setup.settled = &settled;
+    setup.refused_in_part = &refused_in_part;
+    setup.untried_start = &untried_start;
+    setup.untried = &untried;
     ClusterCollapser collapser(again, now_locked, per_thread.local());
     ClusterOutput result = collapser.simplify(0, all_faces.data(), all_faces.data() + all_faces.size(), setup);
     out.refused_for_error += result.refused_for_error;
