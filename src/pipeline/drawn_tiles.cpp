@@ -397,6 +397,80 @@ void outlineEdges(std::span<const std::uint32_t> indices, std::size_t vertex_cou
   }
 }
 
+// The height is the signed distance to the ellipsoid, a convex function whose gradient is the
+// up vector n of the point's latitude and longitude, so from any point x of the triangle every
+// point y of it is at least h(x) + n(x).(y - x) high, and the least of that over the triangle is
+// at a corner (Frank and Wolfe's gap: zero at the lowest point). x runs through Newton's steps
+// from the centroid (the height curves by about 1 / |x| across n) and, when they leave the
+// triangle, along each edge from its middle, until the bound is within 0.1 mm of the lowest
+// height seen: usually two or three conversions, where a lattice every 10 km took up to 2,000.
+double lowestHeightBound(const DrawnTriangle& triangle) {
+  constexpr double kGap_m = 1e-4;  // stop once the bound is this close to a height found
+  struct Sample {
+    double x[3]{}, n[3]{};
+  };
+  const auto dot = [](const double* p, const double* q) { return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]; };
+  const double origin[3] = {triangle.a.x, triangle.a.y, triangle.a.z};
+  double lowest_found = HUGE_VAL, bound = -HUGE_VAL;
+  // Samples the point a + u ab + w ac: its height, up vector and the bound from it.
+  const auto sample = [&](double u, double w) {
+    Sample s;
+    for (int i = 0; i < 3; ++i) s.x[i] = origin[i] + u * triangle.ab[i] + w * triangle.ac[i];
+    const Geodetic g = geodeticOf(s.x[0], s.x[1], s.x[2]);
+    const double lat = g.lat_deg * kDegToRad, lon = g.lon_deg * kDegToRad;
+    s.n[0] = std::cos(lat) * std::cos(lon);
+    s.n[1] = std::cos(lat) * std::sin(lon);
+    s.n[2] = std::sin(lat);
+    double least = 0;  // n.(corner - x) over the corners, at most 0 (x is in the triangle)
+    for (int k = 0; k < 3; ++k) {
+      const EcefPoint& c = triangle.corner(k);
+      least = std::min(least, s.n[0] * (c.x - s.x[0]) + s.n[1] * (c.y - s.x[1]) + s.n[2] * (c.z - s.x[2]));
+    }
+    lowest_found = std::min(lowest_found, g.h_m);
+    bound = std::max(bound, g.h_m + least);
+    return s;
+  };
+  const auto tight = [&] { return lowest_found - bound <= kGap_m; };
+  const auto radius = [&](const Sample& s) { return std::sqrt(dot(s.x, s.x)); };
+  constexpr int kSteps = 4;
+  // Inside: Newton on (u, w), from the centroid.
+  double u = 1.0 / 3, w = 1.0 / 3;
+  for (int step = 0; step < kSteps; ++step) {
+    const Sample s = sample(u, w);
+    if (tight()) return bound;
+    const double g0 = dot(s.n, triangle.ab.data()), g1 = dot(s.n, triangle.ac.data());
+    const double r = radius(s);
+    const double h00 = (dot(triangle.ab.data(), triangle.ab.data()) - g0 * g0) / r;
+    const double h11 = (dot(triangle.ac.data(), triangle.ac.data()) - g1 * g1) / r;
+    const double h01 = (dot(triangle.ab.data(), triangle.ac.data()) - g0 * g1) / r;
+    const double det = h00 * h11 - h01 * h01;
+    if (!(det > 0)) break;
+    u -= (h11 * g0 - h01 * g1) / det;
+    w -= (h00 * g1 - h01 * g0) / det;
+    if (!(u >= 0 && w >= 0 && u + w <= 1)) break;  // the lowest point is on the outline
+  }
+  // Along each edge p + t (q - p): Newton on t, held in [0, 1], from its middle.
+  const double corner_uw[3][2] = {{0, 0}, {1, 0}, {0, 1}};
+  for (int k = 0; k < 3; ++k) {
+    const double* p = corner_uw[k];
+    const double* q = corner_uw[(k + 1) % 3];
+    double d[3];
+    for (int i = 0; i < 3; ++i) d[i] = (q[0] - p[0]) * triangle.ab[i] + (q[1] - p[1]) * triangle.ac[i];
+    const double dd = dot(d, d);
+    double t = 0.5;
+    for (int step = 0; step < kSteps; ++step) {
+      const Sample s = sample(p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]));
+      if (tight()) return bound;
+      const double slope = dot(s.n, d), curvature = (dd - slope * slope) / radius(s);
+      if (!(curvature > 0)) break;
+      const double next = std::clamp(t - slope / curvature, 0.0, 1.0);
+      if (next == t) break;
+      t = next;
+    }
+  }
+  return bound;
+}
+
 Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uint32_t> indices,
                    std::span<const GeodeticOfVertex> known) {
   Region region;
@@ -430,52 +504,26 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   };
   for (const std::size_t v : poles) extend(geodetic[v]);
   constexpr double kRadius_m = 6.3e6;  // below every radius of curvature of WGS84's level surfaces we meet
-  for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
-    const EcefPoint& a = vertices[indices[t]];
-    const EcefPoint& b = vertices[indices[t + 1]];
-    const EcefPoint& c = vertices[indices[t + 2]];
-    const DrawnTriangle triangle(a, b, c);
-    if (triangle.degenerate()) continue;
-    const double edge_m = triangle.longestEdge();
-    // The lowest point: the height is a convex function on the triangle (a signed distance to
-    // a convex body), curved by at most 1 / kRadius_m, so on a lattice of n x n
-    // sub-triangles of side s it is at least the lowest lattice point minus s^2 / (6 R).
-    const int n = std::clamp(static_cast<int>(std::ceil(edge_m / 10e3)), 1, 64);
-    const double side_m = edge_m / n;
-    double lowest = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
-    for (int i = 0; i <= n && n > 1; ++i) {
-      for (int j = 0; i + j <= n; ++j) {
-        if ((i == 0 && j == 0) || (i == n) || (j == n)) continue;  // the corners are known
-        const double u = static_cast<double>(i) / n, w = static_cast<double>(j) / n;
-        const EcefPoint& o = triangle.a;  // the triangle's own first corner: the same bits in build and check
-        const Geodetic g = geodeticOf(o.x + u * triangle.ab[0] + w * triangle.ac[0], o.y + u * triangle.ab[1] + w * triangle.ac[1],
-                                      o.z + u * triangle.ab[2] + w * triangle.ac[2]);
-        lowest = std::min(lowest, g.h_m);
-      }
-    }
-    low = std::min(low, lowest - side_m * side_m / (6 * kRadius_m));
-    // The pole, when the axis pierces the triangle: every longitude.
-    for (const double direction : {1.0, -1.0}) {
-      double offset = 0;
-      if (triangle.meets(EcefPoint{0, 0, 0}, std::array<double, 3>{0, 0, direction}, &offset) && offset > 0) {
-        all_longitudes = true;
-        (direction > 0 ? north : south) = direction * std::numbers::pi / 2;
-      }
-    }
-    // Latitudes: the geocentric latitude on a flat triangle not pierced by the polar axis is
-    // extreme on its edges, where the extreme of z / |X| on A + mu (B - A) is at the mu that
-    // zeroes its derivative (a linear equation); the geodetic latitude of a point is
-    // atan(tan(geocentric) * F) with F = (N + h) / (N (1 - e^2) + h), which grows with |tan|
-    // and shrinks with h and (for h above 0) with N: so the extremes over the triangle are
-    // bounded by its geocentric extremes with F at its lowest height (for the latitude away
-    // from the equator) or its highest (towards it), N at either end of its range.
+  struct LongTriangle {
+    double lowest;  // the curvature's bound
+    std::size_t t;  // its first index
+  };
+  std::vector<LongTriangle> long_triangles;
+  // Latitudes: the geocentric latitude on a flat triangle not pierced by the polar axis is
+  // extreme on its edges, where the extreme of z / |X| on A + mu (B - A) is at the mu that
+  // zeroes its derivative (a linear equation); the geodetic latitude of a point is
+  // atan(tan(geocentric) * F) with F = (N + h) / (N (1 - e^2) + h), which grows with |tan|
+  // and shrinks with h and (for h above 0) with N: so the extremes over the triangle are
+  // bounded by its geocentric extremes with F at a height at most its lowest (for the latitude
+  // away from the equator) or its highest (towards it), N at either end of its range.
+  const auto boundLatitudes = [&](std::size_t t, double lowest_h) {
     double lowest_c = 1e300, highest_c = -1e300;  // geocentric latitude, radians
     for (std::size_t k = 0; k < 3; ++k) {
       const double lat = geocentric_lat[indices[t + k]];
       lowest_c = std::min(lowest_c, lat);
       highest_c = std::max(highest_c, lat);
     }
-    const EcefPoint corner[3] = {a, b, c};
+    const EcefPoint corner[3] = {vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]};
     for (int k = 0; k < 3; ++k) {
       const EcefPoint& p = corner[k];
       const EcefPoint& q = corner[(k + 1) % 3];
@@ -492,7 +540,6 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     }
     const double highest_h =
         std::max({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
-    const double lowest_h = lowest - side_m * side_m / (6 * kRadius_m);
     // N runs from a (equator) to a / sqrt(1 - e^2) (poles).
     const auto& earth = GeographicLib::Geocentric::WGS84();
     const double semi_major = earth.EquatorialRadius(), e2 = earth.Flattening() * (2 - earth.Flattening());
@@ -505,7 +552,46 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     };
     north = std::max(north, geodeticBound(highest_c, highest_c >= 0));
     south = std::min(south, geodeticBound(lowest_c, lowest_c <= 0));
+  };
+  for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+    const EcefPoint& a = vertices[indices[t]];
+    const EcefPoint& b = vertices[indices[t + 1]];
+    const EcefPoint& c = vertices[indices[t + 2]];
+    const DrawnTriangle triangle(a, b, c);
+    if (triangle.degenerate()) continue;
+    const double edge_m = triangle.longestEdge();
+    // The lowest point: the height is a convex function on the triangle (a signed distance to
+    // a convex body), curved by at most 1 / kRadius_m, so it lies at most L^2 / (6 R) below
+    // the corners' plane (L the longest edge; 2.6 m at 10 km). A longer triangle whose bound
+    // that is may lower the region is bounded closely below (lowestHeightBound).
+    const double lowest_corner = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
+    const double lowest = lowest_corner - edge_m * edge_m / (6 * kRadius_m);
+    if (edge_m <= 10e3) low = std::min(low, lowest);
+    else long_triangles.push_back({lowest, t});
+    // The pole, when the axis pierces the triangle: every longitude.
+    for (const double direction : {1.0, -1.0}) {
+      double offset = 0;
+      if (triangle.meets(EcefPoint{0, 0, 0}, std::array<double, 3>{0, 0, direction}, &offset) && offset > 0) {
+        all_longitudes = true;
+        (direction > 0 ? north : south) = direction * std::numbers::pi / 2;
+      }
+    }
+    // Its latitudes: see boundLatitudes. A long triangle's wait for the region's low.
+    if (edge_m <= 10e3) boundLatitudes(t, lowest);
   }
+  // The long triangles, lowest bound first, closely bounded until none may lower the region:
+  // whichever are, the region's low is the least of every triangle's close bound.
+  std::sort(long_triangles.begin(), long_triangles.end(),
+            [](const LongTriangle& p, const LongTriangle& q) { return p.lowest < q.lowest; });
+  for (const LongTriangle& triangle : long_triangles) {
+    if (triangle.lowest >= low) break;
+    const std::size_t t = triangle.t;
+    const double lowest_corner = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
+    const double close = lowestHeightBound(DrawnTriangle(vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]));
+    low = std::min(low, std::clamp(close, triangle.lowest, lowest_corner));
+  }
+  // Whichever triangles were: low is at most each one's least height.
+  for (const LongTriangle& triangle : long_triangles) boundLatitudes(triangle.t, std::max(triangle.lowest, low));
   if (region.empty && !all_longitudes) {
     // Only pole vertices: a degenerate content; take the whole circle.
     all_longitudes = true;

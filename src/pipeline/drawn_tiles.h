@@ -157,6 +157,10 @@ struct OutlineScratch {
 void outlineEdges(std::span<const std::uint32_t> indices, std::size_t vertex_count, OutlineScratch& scratch,
                   std::vector<std::array<std::uint32_t, 2>>& edges);
 
+// A lower bound of the height above the WGS84 ellipsoid over a (flat) triangle, within
+// micrometres of its least: what drawnRegion takes for a triangle over 10 km long.
+double lowestHeightBound(const DrawnTriangle& triangle);
+
 // The region holding every drawn point of the triangles (see the header comment), grown by a
 // millimetre and 1e-10 rad against rounding. A vertex at a pole (|lat| within 1e-9 deg of 90)
 // adds no longitude. `geodetic` (when not empty): every vertex's WGS84 latitude, longitude

@@ -4,6 +4,8 @@
 // centroid (holes) and the grid pyramid (T-junctions) fail: the checker is not blind.
 #include <doctest/doctest.h>
 
+#include <GeographicLib/Geocentric.hpp>
+
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -166,6 +168,55 @@ TEST_SUITE("check") {
       }
     }
     checkScans(globe, nullptr);
+  }
+
+  TEST_CASE("a drawn triangle's lowest height bound is below all of it and within a millimetre of its least") {
+    // Chords of 10 to 3,000 km between ETOPO5 pixels at their heights (trenches to peaks, the
+    // poles' rows too), against the least height of a dense lattice of each (every L / 300),
+    // which lies at most (L / 300)^2 / (6 R) above the triangle's least (the height is convex
+    // and curved by at most 1 / R).
+    const DemGrid etopo = readDem({test::sharedData("etopo5_global_4326.tif")});
+    const DemOnGlobe globe(etopo, nullptr);
+    const auto& earth = GeographicLib::Geocentric::WGS84();
+    std::mt19937 random(11);
+    std::uniform_real_distribution<double> unit(0, 1);
+    constexpr int kLattice = 300;
+    constexpr double kRadius_m = 6.3e6;
+    int triangles = 0, interior_lowest = 0;
+    while (triangles < 60) {
+      const double size_px = std::pow(10.0, 0.3 + 2.3 * unit(random));  // 2 to 400 pixels of 5'
+      const double col = unit(random) * (etopo.width - 1), row = unit(random) * (etopo.height - 1);
+      std::array<EcefPoint, 3> corners;
+      for (EcefPoint& corner : corners) {
+        const auto c = static_cast<std::int32_t>(std::clamp(std::round(col + (unit(random) - 0.5) * size_px), 0.0, etopo.width - 1.0));
+        const auto r = static_cast<std::int32_t>(std::clamp(std::round(row + (unit(random) - 0.5) * size_px), 0.0, etopo.height - 1.0));
+        corner = globe.point(c, r);
+      }
+      const DrawnTriangle triangle(corners[0], corners[1], corners[2]);
+      if (triangle.degenerate() || triangle.longestEdge() < 10e3) continue;
+      ++triangles;
+      double least = HUGE_VAL;
+      int least_i = 0, least_j = 0;
+      for (int i = 0; i <= kLattice; ++i) {
+        for (int j = 0; i + j <= kLattice; ++j) {
+          const double u = static_cast<double>(i) / kLattice, w = static_cast<double>(j) / kLattice;
+          double lat = 0, lon = 0, h = 0;
+          earth.Reverse(triangle.a.x + u * triangle.ab[0] + w * triangle.ac[0], triangle.a.y + u * triangle.ab[1] + w * triangle.ac[1],
+                        triangle.a.z + u * triangle.ab[2] + w * triangle.ac[2], lat, lon, h);
+          if (h < least) least = h, least_i = i, least_j = j;
+        }
+      }
+      if (least_i > 0 && least_j > 0 && least_i + least_j < kLattice) ++interior_lowest;
+      const double bound = lowestHeightBound(triangle);
+      const double side_m = triangle.longestEdge() / kLattice;
+      CAPTURE(triangle.longestEdge());
+      CAPTURE(least);
+      CHECK(bound <= least);
+      CHECK(bound >= least - side_m * side_m / (6 * kRadius_m) - 1e-3);
+    }
+    MESSAGE(triangles << " triangles, " << interior_lowest << " lowest inside");
+    CHECK(interior_lowest >= 5);  // both of the bound's searches are met
+    CHECK(triangles - interior_lowest >= 10);
   }
 
   TEST_CASE("outline edges are the edges exactly one triangle has in ascending order") {
