@@ -478,16 +478,17 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   std::vector<std::uint8_t> used(vertices.size(), 0);
   for (const std::uint32_t v : indices) used[v] = 1;
   bool all_longitudes = false;
-  const auto geocentric = [](double x, double y, double z) { return std::atan2(z, std::hypot(x, y)); };
-  // Per vertex, its geocentric latitude (radians): what every triangle round it takes.
-  std::vector<double> geocentric_lat(vertices.size(), 0.0);
+  // The tangent of a point's geocentric latitude (infinite at a pole), which grows with it.
+  const auto geocentricTan = [](double x, double y, double z) { return z / std::sqrt(x * x + y * y); };
+  // Per vertex: what every triangle round it takes.
+  std::vector<double> geocentric_tan(vertices.size(), 0.0);
   // Vertices; one at a pole adds no longitude (it has none).
   std::vector<std::size_t> poles;
   for (std::size_t v = 0; v < vertices.size(); ++v) {
     if (!used[v]) continue;
     geodetic[v] = known.empty() ? geodeticOf(vertices[v].x, vertices[v].y, vertices[v].z)
                                 : Geodetic{known[v].lat_deg, known[v].lon_deg, known[v].h_m};
-    geocentric_lat[v] = geocentric(vertices[v].x, vertices[v].y, vertices[v].z);
+    geocentric_tan[v] = geocentricTan(vertices[v].x, vertices[v].y, vertices[v].z);
     if (std::fabs(geodetic[v].lat_deg) >= kPoleDeg) {
       poles.push_back(v);
       continue;
@@ -508,7 +509,7 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     double lowest;  // the curvature's bound
     std::size_t t;  // its first index
   };
-  std::vector<LongTriangle> long_triangles;
+  std::vector<LongTriangle> long_triangles, may_lower;  // may_lower: those whose bound is below low
   // Latitudes: the geocentric latitude on a flat triangle not pierced by the polar axis is
   // extreme on its edges, where the extreme of z / |X| on A + mu (B - A) is at the mu that
   // zeroes its derivative (a linear equation); the geodetic latitude of a point is
@@ -516,12 +517,18 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   // and shrinks with h and (for h above 0) with N: so the extremes over the triangle are
   // bounded by its geocentric extremes with F at a height at most its lowest (for the latitude
   // away from the equator) or its highest (towards it), N at either end of its range.
+  // N runs from a (equator) to a / sqrt(1 - e^2) (poles).
+  const auto& earth = GeographicLib::Geocentric::WGS84();
+  const double semi_major = earth.EquatorialRadius(), e2 = earth.Flattening() * (2 - earth.Flattening());
+  const auto factor = [e2](double radius, double h) { return (radius + h) / (radius * (1 - e2) + h); };
+  const double polar_n = semi_major / std::sqrt(1 - e2);
+  double north_tan = -HUGE_VAL, south_tan = HUGE_VAL;  // tangents of the bounds (atan is monotone)
   const auto boundLatitudes = [&](std::size_t t, double lowest_h) {
-    double lowest_c = 1e300, highest_c = -1e300;  // geocentric latitude, radians
+    double lowest_c = HUGE_VAL, highest_c = -HUGE_VAL;  // tangents of geocentric latitudes
     for (std::size_t k = 0; k < 3; ++k) {
-      const double lat = geocentric_lat[indices[t + k]];
-      lowest_c = std::min(lowest_c, lat);
-      highest_c = std::max(highest_c, lat);
+      const double tan_c = geocentric_tan[indices[t + k]];
+      lowest_c = std::min(lowest_c, tan_c);
+      highest_c = std::max(highest_c, tan_c);
     }
     const EcefPoint corner[3] = {vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]};
     for (int k = 0; k < 3; ++k) {
@@ -534,24 +541,16 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
       if (denominator == 0) continue;
       const double mu = (p.z * pd - d[2] * pp) / denominator;
       if (!(mu > 0 && mu < 1)) continue;
-      const double lat = geocentric(p.x + mu * d[0], p.y + mu * d[1], p.z + mu * d[2]);
-      lowest_c = std::min(lowest_c, lat);
-      highest_c = std::max(highest_c, lat);
+      const double tan_c = geocentricTan(p.x + mu * d[0], p.y + mu * d[1], p.z + mu * d[2]);
+      lowest_c = std::min(lowest_c, tan_c);
+      highest_c = std::max(highest_c, tan_c);
     }
     const double highest_h =
         std::max({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
-    // N runs from a (equator) to a / sqrt(1 - e^2) (poles).
-    const auto& earth = GeographicLib::Geocentric::WGS84();
-    const double semi_major = earth.EquatorialRadius(), e2 = earth.Flattening() * (2 - earth.Flattening());
-    const auto factor = [e2](double radius, double h) { return (radius + h) / (radius * (1 - e2) + h); };
-    const double polar_n = semi_major / std::sqrt(1 - e2);
     const double f_low_h = std::max(factor(semi_major, lowest_h), factor(polar_n, lowest_h));
     const double f_high_h = std::min(factor(semi_major, highest_h), factor(polar_n, highest_h));
-    const auto geodeticBound = [&](double lat_c, bool poleward) {
-      return std::atan(std::tan(lat_c) * (poleward ? f_low_h : f_high_h));
-    };
-    north = std::max(north, geodeticBound(highest_c, highest_c >= 0));
-    south = std::min(south, geodeticBound(lowest_c, lowest_c <= 0));
+    north_tan = std::max(north_tan, highest_c * (highest_c >= 0 ? f_low_h : f_high_h));
+    south_tan = std::min(south_tan, lowest_c * (lowest_c <= 0 ? f_low_h : f_high_h));
   };
   for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
     const EcefPoint& a = vertices[indices[t]];
@@ -566,8 +565,12 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     // that is may lower the region is bounded closely below (lowestHeightBound).
     const double lowest_corner = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
     const double lowest = lowest_corner - edge_m * edge_m / (6 * kRadius_m);
-    if (edge_m <= 10e3) low = std::min(low, lowest);
-    else long_triangles.push_back({lowest, t});
+    if (edge_m <= 10e3) {
+      low = std::min(low, lowest);
+    } else {
+      long_triangles.push_back({lowest, t});
+      if (lowest < low) may_lower.push_back({lowest, t});
+    }
     // The pole, when the axis pierces the triangle: every longitude.
     for (const double direction : {1.0, -1.0}) {
       double offset = 0;
@@ -579,11 +582,11 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     // Its latitudes: see boundLatitudes. A long triangle's wait for the region's low.
     if (edge_m <= 10e3) boundLatitudes(t, lowest);
   }
-  // The long triangles, lowest bound first, closely bounded until none may lower the region:
-  // whichever are, the region's low is the least of every triangle's close bound.
-  std::sort(long_triangles.begin(), long_triangles.end(),
+  // The long triangles that may lower the region, lowest bound first, closely bounded until
+  // none may: whichever are, the region's low is the least of every triangle's close bound.
+  std::sort(may_lower.begin(), may_lower.end(),
             [](const LongTriangle& p, const LongTriangle& q) { return p.lowest < q.lowest; });
-  for (const LongTriangle& triangle : long_triangles) {
+  for (const LongTriangle& triangle : may_lower) {
     if (triangle.lowest >= low) break;
     const std::size_t t = triangle.t;
     const double lowest_corner = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
@@ -592,6 +595,8 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   }
   // Whichever triangles were: low is at most each one's least height.
   for (const LongTriangle& triangle : long_triangles) boundLatitudes(triangle.t, std::max(triangle.lowest, low));
+  if (north_tan > -HUGE_VAL) north = std::max(north, std::atan(north_tan));
+  if (south_tan < HUGE_VAL) south = std::min(south, std::atan(south_tan));
   if (region.empty && !all_longitudes) {
     // Only pole vertices: a degenerate content; take the whole circle.
     all_longitudes = true;
