@@ -571,8 +571,14 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
       long_triangles.push_back({lowest, t});
       if (lowest < low) may_lower.push_back({lowest, t});
     }
-    // The pole, when the axis pierces the triangle: every longitude.
+    // The pole, when the axis pierces the triangle: every longitude. (It cannot when the
+    // corners lie clearly on one side of a plane through it, x = 0 or y = 0: further than
+    // meets's tolerance, 1e-9 of an edge, reaches.)
+    const double side = 1e-8 * edge_m + 1e-6;
+    const bool may_hold_axis = !((a.x > side && b.x > side && c.x > side) || (a.x < -side && b.x < -side && c.x < -side) ||
+                                 (a.y > side && b.y > side && c.y > side) || (a.y < -side && b.y < -side && c.y < -side));
     for (const double direction : {1.0, -1.0}) {
+      if (!may_hold_axis) break;
       double offset = 0;
       if (triangle.meets(EcefPoint{0, 0, 0}, std::array<double, 3>{0, 0, direction}, &offset) && offset > 0) {
         all_longitudes = true;
