@@ -946,6 +946,8 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
         untried_start.push_back(static_cast<std::uint32_t>(untried.size()));
       }
     }
+    // The parts are read: their memory serves the whole pass.
+    for (const std::uint32_t unit : units_of_split[c]) unit_outputs[unit] = ClusterOutput();
     // A vertex next to a seam (locked in the parts, free now) has new collapses: queued afresh.
     for (std::size_t corner = 0; corner < now.triangle_indices.size(); corner += 3) {
       const std::uint32_t* t = &now.triangle_indices[corner];
