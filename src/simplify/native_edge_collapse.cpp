@@ -869,6 +869,7 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
     }
   }
   unit_start.push_back(static_cast<std::uint32_t>(unit_faces.size()));
+  centroid = std::vector<std::array<double, 2>>();  // the cuts are made
 
   // 1. Whole clusters and parts, the seams between parts locked.
   LevelInput units = in;
@@ -892,6 +893,9 @@ std::vector<ClusterOutput> collapseNatively(const LevelInput& in) {
     setup.keep_quadrics = true;
     unit_outputs[unit] = collapser.simplify(static_cast<std::int32_t>(clusters + unit), begin, end, setup);
   });
+
+  unit_faces = std::vector<std::uint32_t>();  // the units are simplified (locked_units holds their seams)
+  unit_of_face = std::vector<std::int32_t>();
 
   // 2. Each split cluster whole again, from its parts' result.
   std::vector<std::uint32_t> split_start{0};
