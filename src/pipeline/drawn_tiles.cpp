@@ -506,8 +506,9 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   for (const std::size_t v : poles) extend(geodetic[v]);
   constexpr double kRadius_m = 6.3e6;  // below every radius of curvature of WGS84's level surfaces we meet
   struct LongTriangle {
-    double lowest;  // the curvature's bound
-    std::size_t t;  // its first index
+    double lowest;         // the curvature's bound
+    double lowest_corner;  // its lowest corner's height
+    std::size_t t;         // its first index
   };
   std::vector<LongTriangle> long_triangles, may_lower;  // may_lower: those whose bound is below low
   // Latitudes: the geocentric latitude on a flat triangle not pierced by the polar axis is
@@ -561,15 +562,15 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     const double edge_m = triangle.longestEdge();
     // The lowest point: the height is a convex function on the triangle (a signed distance to
     // a convex body), curved by at most 1 / kRadius_m, so it lies at most L^2 / (6 R) below
-    // the corners' plane (L the longest edge; 2.6 m at 10 km). A longer triangle whose bound
-    // that is may lower the region is bounded closely below (lowestHeightBound).
+    // the corners' plane (L the longest edge; 2.6 m at 10 km). A longer triangle, when that
+    // bound may lower the region, is bounded closely (lowestHeightBound, below).
     const double lowest_corner = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
     const double lowest = lowest_corner - edge_m * edge_m / (6 * kRadius_m);
     if (edge_m <= 10e3) {
       low = std::min(low, lowest);
     } else {
-      long_triangles.push_back({lowest, t});
-      if (lowest < low) may_lower.push_back({lowest, t});
+      long_triangles.push_back({lowest, lowest_corner, t});
+      if (lowest < low) may_lower.push_back(long_triangles.back());
     }
     // The pole, when the axis pierces the triangle: every longitude. (It cannot when the
     // corners lie clearly on one side of a plane through it, x = 0 or y = 0: further than
@@ -585,7 +586,7 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
         (direction > 0 ? north : south) = direction * std::numbers::pi / 2;
       }
     }
-    // Its latitudes: see boundLatitudes. A long triangle's wait for the region's low.
+    // Its latitudes (boundLatitudes); a long triangle's wait until the region's low is known.
     if (edge_m <= 10e3) boundLatitudes(t, lowest);
   }
   // The long triangles that may lower the region, lowest bound first, closely bounded until
@@ -595,9 +596,8 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
   for (const LongTriangle& triangle : may_lower) {
     if (triangle.lowest >= low) break;
     const std::size_t t = triangle.t;
-    const double lowest_corner = std::min({geodetic[indices[t]].h_m, geodetic[indices[t + 1]].h_m, geodetic[indices[t + 2]].h_m});
     const double close = lowestHeightBound(DrawnTriangle(vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]));
-    low = std::min(low, std::clamp(close, triangle.lowest, lowest_corner));
+    low = std::min(low, std::clamp(close, triangle.lowest, triangle.lowest_corner));
   }
   // Whichever triangles were: low is at most each one's least height.
   for (const LongTriangle& triangle : long_triangles) boundLatitudes(triangle.t, std::max(triangle.lowest, low));
