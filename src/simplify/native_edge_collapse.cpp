@@ -117,6 +117,18 @@ struct ClusterArrays {
   std::vector<EdgeOptimum> edge_optima = std::vector<EdgeOptimum>(16384);
   std::vector<std::uint32_t> version;  // per local vertex
   std::uint32_t generation = 0;
+  // Collapses the filter refused, by (u, v, placement) (direct-mapped): the new triangle that
+  // failed, made from `triangle` of u's star (or v's, when v moves), and the count of
+  // collapses applied then. As long as neither end nor any corner of that triangle has changed
+  // since (changed_at), the collapse makes the same triangle and fails again: a vertex
+  // queued again after a collapse next to it skips its refused collapses that collapse did
+  // not touch.
+  struct Refusal {
+    std::uint32_t u = kNone, v_and_placement = 0, triangle = 0, applied = 0, generation = 0;
+    bool for_error = false;
+  };
+  std::vector<Refusal> refusals = std::vector<Refusal>(16384);
+  std::vector<std::uint32_t> changed_at;  // per local vertex: the count of collapses applied when its quadric or place last changed
 };
 
 // How a cluster is loaded besides its faces: for a part of a split cluster, and for the whole
@@ -496,8 +508,11 @@ class ClusterCollapser {
     a_.removed.assign(vertices, 0);
     a_.broken_pixel.assign(vertices, kNoPixel);
     a_.version.assign(vertices, 0);
+    a_.changed_at.assign(vertices, 0);
+    applied_ = 0;
     if (++a_.generation == 0) {  // wrapped: forget every entry
       a_.edge_optima.assign(a_.edge_optima.size(), ClusterArrays::EdgeOptimum{});
+      a_.refusals.assign(a_.refusals.size(), ClusterArrays::Refusal{});
       a_.generation = 1;
     }
     a_.best.assign(vertices, Collapse{});
@@ -593,9 +608,35 @@ class ClusterCollapser {
     if (a_.waiting.capacity() < wanted) a_.waiting.reserve(wanted);
   }
 
+  ClusterArrays::Refusal& refusalOf(std::uint32_t u, std::uint32_t v_and_placement) {
+    const std::uint64_t hash =
+        (std::uint64_t{u} * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t{v_and_placement} * 0xC2B2AE3D27D4EB4Full);
+    return a_.refusals[(hash >> 32) & (a_.refusals.size() - 1)];
+  }
+  static std::uint32_t vAndPlacement(const Collapse& c) {
+    return (c.v << 2) | (c.on_edge ? 2u : c.moves ? 1u : 0u);
+  }
+  // The filter refused this collapse before and it would make the same failing triangle now.
+  bool refusedAgain(const ClusterArrays::Refusal& r, std::uint32_t u, std::uint32_t v_and_placement) const {
+    if (r.u != u || r.v_and_placement != v_and_placement || r.generation != a_.generation) return false;
+    const std::uint32_t v = v_and_placement >> 2;
+    if (a_.changed_at[u] > r.applied || a_.changed_at[v] > r.applied || !a_.alive[r.triangle]) return false;
+    const std::uint32_t* c = &a_.corners[3 * r.triangle];
+    return a_.changed_at[c[0]] <= r.applied && a_.changed_at[c[1]] <= r.applied && a_.changed_at[c[2]] <= r.applied;
+  }
+  void rememberRefusal(ClusterArrays::Refusal& r, std::uint32_t u, std::uint32_t v_and_placement, bool for_error) {
+    r = {u, v_and_placement, failed_triangle_, applied_, a_.generation, for_error};
+  }
+
   // Applies the collapse of u when the filter accepts it. Needs u's star gathered.
   bool accepts(std::uint32_t u, const Collapse& collapse, ClusterOutput& out) {
     const std::uint32_t v = collapse.v;
+    const std::uint32_t v_and_placement = vAndPlacement(collapse);
+    ClusterArrays::Refusal& refusal = refusalOf(u, v_and_placement);
+    if (refusedAgain(refusal, u, v_and_placement)) {
+      ++(refusal.for_error ? out.refused_for_error : out.refused_for_flip);
+      return false;
+    }
     // The placed point's slot is almost never in the cache (3 MB, read at random): fetch it
     // while the star and the fold-over tests run.
     if (options_.globe && collapse.moves) {
@@ -603,16 +644,31 @@ class ClusterCollapser {
       __builtin_prefetch(slot);
       __builtin_prefetch(slot + sizeof(ClusterArrays::PlacedPoint) - 1);  // it may span two lines
     }
-    gatherStar(v, a_.v_triangles, a_.v_ring);
     const GridPoint& placed = collapse.placed;
-    if (!linkIsTwoVertices(u) || !keepsHeightField(u, v, collapse.moves, placed)) {
+    const bool budgeted = std::isfinite(options_.max_error_m);
+    // Most tries fail at the pixel that broke u's last try (see withinBudget): a collapse
+    // where v stays needs neither v's star nor a new place for that test, so it runs first.
+    if (!collapse.moves && budgeted && breaksAtRememberedPixel(u, v, false, placed, a_.ecef[v])) {
+      rememberRefusal(refusal, u, v_and_placement, true);
+      ++out.refused_for_error;
+      return false;
+    }
+    gatherStar(v, a_.v_triangles, a_.v_ring);
+    if (!keepsHeightField(u, v, collapse.moves, placed)) {
+      rememberRefusal(refusal, u, v_and_placement, false);
       ++out.refused_for_flip;
       return false;
     }
     // A moved vertex is placed on the globe exactly as the pipeline will place it.
     const EcefPoint placed_ecef = !options_.globe ? EcefPoint{} : collapse.moves ? placeOnGlobe(placed) : a_.ecef[v];
-    if (std::isfinite(options_.max_error_m) && !withinBudget(u, v, collapse.moves, placed, placed_ecef)) {
+    if (budgeted && ((collapse.moves && breaksAtRememberedPixel(u, v, true, placed, placed_ecef)) ||
+                     !withinBudget(u, v, collapse.moves, placed, placed_ecef))) {
+      rememberRefusal(refusal, u, v_and_placement, true);
       ++out.refused_for_error;
+      return false;
+    }
+    if (!linkIsTwoVertices(u)) {
+      ++out.refused_for_flip;
       return false;
     }
     apply(u, v, collapse.moves, placed, placed_ecef);
@@ -634,18 +690,25 @@ class ClusterCollapser {
   // vertex: u's star without the two triangles of edge uv, u replaced; with `moves`, also v's
   // star without them (v moves). Needs u_triangles and v_triangles gathered.
   static constexpr std::uint32_t kPlaced = kNone - 1;
+  // On failure the triangle of the star it came from is failed_triangle_.
   template <typename Test>
   bool allNewTriangles(std::uint32_t u, std::uint32_t v, bool moves, Test&& test) const {
     for (const std::uint32_t t : a_.u_triangles) {
       const std::uint32_t* c = &a_.corners[3 * t];
       if (c[0] == v || c[1] == v || c[2] == v) continue;
-      if (!test(c[0] == u ? kPlaced : c[0], c[1] == u ? kPlaced : c[1], c[2] == u ? kPlaced : c[2])) return false;
+      if (!test(c[0] == u ? kPlaced : c[0], c[1] == u ? kPlaced : c[1], c[2] == u ? kPlaced : c[2])) {
+        failed_triangle_ = t;
+        return false;
+      }
     }
     if (!moves) return true;
     for (const std::uint32_t t : a_.v_triangles) {
       const std::uint32_t* c = &a_.corners[3 * t];
       if (c[0] == u || c[1] == u || c[2] == u) continue;
-      if (!test(c[0] == v ? kPlaced : c[0], c[1] == v ? kPlaced : c[1], c[2] == v ? kPlaced : c[2])) return false;
+      if (!test(c[0] == v ? kPlaced : c[0], c[1] == v ? kPlaced : c[1], c[2] == v ? kPlaced : c[2])) {
+        failed_triangle_ = t;
+        return false;
+      }
     }
     return true;
   }
@@ -676,8 +739,22 @@ class ClusterCollapser {
     return entry.ecef;
   }
 
-  // The budget: a pixel that broke one of u's collapses before is tested first against every
-  // new triangle (it usually breaks the next try too), then every pixel.
+  // The budget, first at the pixel that broke one of u's collapses before (it usually breaks
+  // the next try too): true when a new triangle is beyond the budget there.
+  bool breaksAtRememberedPixel(std::uint32_t u, std::uint32_t v, bool moves, const GridPoint& placed,
+                               const EcefPoint& placed_ecef) const {
+    const DemOnGlobe* globe = options_.globe;
+    const std::size_t remembered = a_.broken_pixel[u];
+    if (!globe || remembered == kNoPixel) return false;
+    const auto at = [&](std::uint32_t w) -> const GridPoint& { return w == kPlaced ? placed : a_.grid[w]; };
+    const auto ecefAt = [&](std::uint32_t w) -> const EcefPoint& { return w == kPlaced ? placed_ecef : a_.ecef[w]; };
+    return !allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
+      return !exceedsBudgetAtPixel(*globe, at(p), at(q), at(r), ecefAt(p), ecefAt(q), ecefAt(r), options_.max_error_m,
+                                   remembered);
+    });
+  }
+
+  // The budget at every pixel the new triangles cover (the remembered one was tested first).
   bool withinBudget(std::uint32_t u, std::uint32_t v, bool moves, const GridPoint& placed,
                     const EcefPoint& placed_ecef) {
     const double budget_m = options_.max_error_m;
@@ -690,13 +767,6 @@ class ClusterCollapser {
       });
     }
     std::size_t& remembered = a_.broken_pixel[u];
-    if (remembered != kNoPixel &&
-        !allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
-          return !exceedsBudgetAtPixel(*globe, at(p), at(q), at(r), ecefAt(p), ecefAt(q), ecefAt(r), budget_m,
-                                       remembered);
-        })) {
-      return false;
-    }
     return allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
       return !exceedsBudgetOnGlobe(*globe, at(p), at(q), at(r), ecefAt(p), ecefAt(q), ecefAt(r), budget_m,
                                    &remembered);
@@ -722,6 +792,7 @@ class ClusterCollapser {
       if (options_.globe) a_.ecef[v] = placed_ecef;
     }
     a_.removed[u] = 1;
+    a_.changed_at[v] = ++applied_;
     ++a_.version[v];  // a new quadric, maybe a new place: its edges' optima change
     a_.absorbed_next[a_.absorbed_last[v]] = u;
     a_.absorbed_last[v] = a_.absorbed_last[u];
@@ -738,6 +809,8 @@ class ClusterCollapser {
   const std::vector<std::uint8_t>& locked_vertex_;
   ClusterArrays& a_;
   std::size_t edges_ = 0, initial_edges_ = 0, live_triangles_ = 0;
+  std::uint32_t applied_ = 0;                  // collapses applied in this run
+  mutable std::uint32_t failed_triangle_ = 0;  // see allNewTriangles
   double edge_ratio_ = 0.5;
   const ClusterSetup* setup_ = nullptr;
   GridPoint origin_;
