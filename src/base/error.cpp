@@ -11,6 +11,7 @@ int exitCodeFor(ErrorCode code) {
     case ErrorCode::Input: return 3;
     case ErrorCode::Output: return 4;
     case ErrorCode::Internal: return 1;
+    case ErrorCode::OutOfMemory: return 6;
     case ErrorCode::Cancelled: return 130;
   }
   return 1;

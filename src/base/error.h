@@ -13,6 +13,7 @@ enum class ErrorCode {
   Input,      // unreadable or unsupported input; exit 3
   Output,     // output cannot be written; exit 4
   Internal,   // a bug or a library failure we did not expect; exit 1
+  OutOfMemory,  // an allocation failed (the machine's memory or a ulimit); exit 6
   Cancelled,  // interrupted (SIGINT); exit 130
 };
 

@@ -67,5 +67,6 @@ TEST_SUITE("base") {
     CHECK(exitCodeFor(ErrorCode::Usage) == 2);
     CHECK(exitCodeFor(ErrorCode::Input) == 3);
     CHECK(exitCodeFor(ErrorCode::Output) == 4);
+    CHECK(exitCodeFor(ErrorCode::OutOfMemory) == 6);
   }
 }

@@ -1,7 +1,12 @@
 #include <doctest/doctest.h>
+#include <fcntl.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 #include "tests/test_support.h"
 
@@ -35,6 +40,7 @@ TEST_SUITE("cli") {
     CHECK(help.out.find("metres") != std::string::npos);
     CHECK(help.out.find("Exit codes: 0 ok, 1 internal error, 2 usage, 3 bad input, 4 output") !=
           std::string::npos);
+    CHECK(help.out.find("6 out of memory") != std::string::npos);
   }
 
   TEST_CASE("usage errors exit 2 with one line") {
@@ -86,6 +92,40 @@ TEST_SUITE("cli") {
     std::size_t entries = 0;
     for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir.path())) ++entries;
     CHECK(entries == 2);  // notes.txt and nocrs.tif
+  }
+
+  TEST_CASE("a build that runs out of memory exits 6 with one line and leaves nothing behind") {
+    // The real binary under a 300 MiB address-space limit (Gabon's build peaks near 400 MB
+    // of RSS): an allocation fails somewhere in the pipeline, whichever it is.
+    test::TempDir dir;
+    const std::string out = dir / "out";
+    const std::string err_path = dir / "stderr.txt";
+    std::vector<std::string> args{TERRATILES_BINARY, "build", sharedData("srtm3_N00E010-E011_4326.tif"), "-o", out,
+                                  "--tin-max-error", "5", "--progress", "none"};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    const pid_t pid = fork();
+    REQUIRE(pid >= 0);
+    if (pid == 0) {
+      const rlimit limit{300ull << 20, 300ull << 20};
+      const int fd = open(err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd < 0 || dup2(fd, STDERR_FILENO) < 0 || setrlimit(RLIMIT_AS, &limit) != 0) _exit(99);
+      execv(TERRATILES_BINARY, argv.data());
+      _exit(98);
+    }
+    int status = 0;
+    REQUIRE(waitpid(pid, &status, 0) == pid);
+    REQUIRE(WIFEXITED(status));
+    std::ifstream err_in(err_path);
+    test::CliResult result;
+    result.err.assign(std::istreambuf_iterator<char>(err_in), std::istreambuf_iterator<char>());
+    CHECK(WEXITSTATUS(status) == 6);
+    checkOneLineError(result, "out of memory; a build needs about 140 bytes per input pixel");
+    CHECK_FALSE(fs::exists(out));
+    std::size_t entries = 0;  // no staging directory either
+    for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir.path())) ++entries;
+    CHECK(entries == 1);  // stderr.txt
   }
 
   TEST_CASE("unwritable or occupied output directories exit 4") {

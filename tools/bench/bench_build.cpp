@@ -268,6 +268,7 @@ ErrorCode errorCodeOfExit(int status) {
     case 2: return ErrorCode::Usage;
     case 3: return ErrorCode::Input;
     case 4: return ErrorCode::Output;
+    case 6: return ErrorCode::OutOfMemory;
     default: return ErrorCode::Internal;
   }
 }

@@ -42,7 +42,13 @@ namespace {
 
 constexpr const char* kExitCodes =
     "Exit codes: 0 ok, 1 internal error, 2 usage, 3 bad input, 4 output not writable, "
-    "130 interrupted.";
+    "6 out of memory, 130 interrupted (check: 5 a violation).";
+
+// What a build needs (tools/bench/README.md: 137-138 bytes per pixel on Gabon and ETOPO5,
+// more on small rasters, where about 65 MB are fixed).
+constexpr const char* kOutOfMemory =
+    "out of memory; a build needs about 140 bytes per input pixel at its peak (plus about 65 MB): split the input "
+    "into smaller rasters (gdal_translate -srcwin) or raise --tin-max-error; with --lod grid, lower --tile-cells";
 
 extern "C" void onInterrupt(int) { Progress::requestCancel(); }
 
@@ -813,8 +819,8 @@ int runCli(const std::vector<std::string>& args, std::istream& in, std::ostream&
     err << "terratiles: error: " << e.what() << "\n";
     return exitCodeFor(e.code());
   } catch (const std::bad_alloc&) {
-    err << "terratiles: error: out of memory; try a smaller input or --tile-cells\n";
-    return exitCodeFor(ErrorCode::Internal);
+    err << "terratiles: error: " << kOutOfMemory << "\n";
+    return exitCodeFor(ErrorCode::OutOfMemory);
   } catch (const std::exception& e) {
     err << "terratiles: error: internal: " << e.what() << "\n";
     return exitCodeFor(ErrorCode::Internal);

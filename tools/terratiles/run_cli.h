@@ -3,7 +3,8 @@
 // (args[0] is the program name), runs the command reading `in` where it takes standard
 // input (transform), prints help, results and the summary to `out`/`err`, and returns the
 // process exit code:
-//   0 ok, 1 internal error, 2 usage, 3 bad input, 4 output not writable, 130 interrupted.
+//   0 ok, 1 internal error, 2 usage, 3 bad input, 4 output not writable, 6 out of memory,
+//   130 interrupted; `check` returns 5 when it finds a violation.
 // Errors are one line on `err`: "terratiles: error: ...". Never throws.
 
 #include <iosfwd>
