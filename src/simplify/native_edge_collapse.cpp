@@ -56,6 +56,22 @@ struct Collapse {
   }
 };
 
+// A collapse of a refused vertex u not tried yet (ClusterArrays::waiting): its cost, for the
+// order, and which it is (UntriedCollapse's placement). Where v would go is computed again
+// when it is tried, the same bits: nothing it depends on (the quadrics and places of u and
+// v) changes while u waits, since a collapse that changes u or v, or u's star, queues u
+// afresh and drops its list. 16 bytes instead of a Collapse's 40: at ETOPO5's coarse levels
+// the lists held up to 110 MB per thread.
+struct WaitingCollapse {
+  double cost = 0;
+  std::uint32_t v = kNone;
+  std::uint8_t placement = UntriedCollapse::kStays;
+};
+
+std::uint8_t placementOf(const Collapse& c) {
+  return c.on_edge ? UntriedCollapse::kOnEdge : c.moves ? UntriedCollapse::kOptimum : UntriedCollapse::kStays;
+}
+
 // One thread's arrays, reused for every cluster it simplifies.
 struct ClusterArrays {
   std::vector<std::uint32_t> local_of_vertex;  // per input vertex: its local index, or kNone
@@ -82,8 +98,9 @@ struct ClusterArrays {
   // waiting[waiting_next[u] .. waiting_end[u]) (a pool for the cluster, compacted as it grows;
   // a list is dropped when the star changes).
   std::vector<std::uint8_t> refused;
-  std::vector<Collapse> waiting, waiting_kept;
+  std::vector<WaitingCollapse> waiting;
   std::vector<std::uint32_t> waiting_next, waiting_end;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> live_lists;  // compactWaiting's (start, vertex)
   // The queue: a binary heap of free vertices by (best_cost, vertex), and each vertex's place
   // in it (kNone: not queued).
   struct QueueEntry {
@@ -184,10 +201,8 @@ class ClusterCollapser {
         out.refused_vertices.push_back(a_.identity[l]);
         out.untried_start.push_back(static_cast<std::uint32_t>(out.untried.size()));
         for (std::uint32_t i = a_.waiting_next[l]; i < a_.waiting_end[l]; ++i) {
-          const Collapse& c = a_.waiting[i];
-          out.untried.push_back({a_.identity[c.v], static_cast<std::uint8_t>(c.on_edge ? UntriedCollapse::kOnEdge
-                                                                             : c.moves ? UntriedCollapse::kOptimum
-                                                                                       : UntriedCollapse::kStays)});
+          const WaitingCollapse& c = a_.waiting[i];
+          out.untried.push_back({a_.identity[c.v], c.placement});
         }
       }
       out.untried_start.push_back(static_cast<std::uint32_t>(out.untried.size()));
@@ -305,13 +320,14 @@ class ClusterCollapser {
   }
 
   // quadricOptimum(q, u, v), remembered for the edge uv until a collapse changes u or v.
-  Collapse cachedOptimum(const Quadric& q, std::uint32_t u, std::uint32_t v) {
+  // q: the edge's quadric, or nullptr to sum it only when the optimum is not remembered.
+  Collapse cachedOptimum(const Quadric* q, std::uint32_t u, std::uint32_t v) {
     const std::uint32_t lo = std::min(u, v), hi = std::max(u, v);
     const std::uint64_t hash = (std::uint64_t{lo} * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t{hi} * 0xC2B2AE3D27D4EB4Full);
     ClusterArrays::EdgeOptimum& entry = a_.edge_optima[(hash >> 32) & (a_.edge_optima.size() - 1)];
     if (entry.lo != lo || entry.hi != hi || entry.lo_version != a_.version[lo] || entry.hi_version != a_.version[hi] ||
         entry.generation != a_.generation) {
-      const Collapse optimum = quadricOptimum(q, u, v);
+      const Collapse optimum = quadricOptimum(q ? *q : combined(u, v), u, v);
       entry = {lo, hi, a_.version[lo], a_.version[hi], a_.generation, optimum.moves, optimum.cost, optimum.placed};
     }
     Collapse collapse;
@@ -455,7 +471,7 @@ class ClusterCollapser {
     const Quadric q = combined(u, v);
     add(stays(q, v));
     if (a_.locked[v]) return;
-    const Collapse moved = cachedOptimum(q, u, v);
+    const Collapse moved = cachedOptimum(&q, u, v);
     if (moved.moves) add(moved);
     if (moved.moves && !all) return;
     const Collapse on_edge = segmentOptimum(q, u, v);
@@ -544,13 +560,33 @@ class ClusterCollapser {
     for (std::uint32_t i = begin; i < end; ++i) {
       const UntriedCollapse& c = (*setup_->untried)[i];
       const std::uint32_t v = a_.local_of_vertex[c.into];
-      const Quadric q = combined(u, v);
-      a_.waiting.push_back(c.placement == UntriedCollapse::kStays     ? stays(q, v)
-                           : c.placement == UntriedCollapse::kOptimum ? cachedOptimum(q, u, v)
-                                                                      : segmentOptimum(q, u, v));
+      a_.waiting.push_back({collapseOf(u, v, c.placement).cost, v, c.placement});
     }
     a_.waiting_end[u] = static_cast<std::uint32_t>(a_.waiting.size());
-    if (begin < end) queueAt(u, a_.waiting[a_.waiting_next[u]]);
+    if (begin < end) queueAt(u, queuedAt(a_.waiting[a_.waiting_next[u]]));
+  }
+
+  // u's collapse into v with that placement (UntriedCollapse's), as collapsesInto makes it.
+  Collapse collapseOf(std::uint32_t u, std::uint32_t v, std::uint8_t placement) {
+    if (placement == UntriedCollapse::kOptimum) return cachedOptimum(nullptr, u, v);
+    const Quadric q = combined(u, v);
+    return placement == UntriedCollapse::kStays ? stays(q, v) : segmentOptimum(q, u, v);
+  }
+  // The same for a waiting collapse, whose cost is known: v staying where it is needs no sum.
+  Collapse collapseOf(std::uint32_t u, const WaitingCollapse& w) {
+    if (w.placement == UntriedCollapse::kStays) return {w.cost, w.v, false, false, a_.grid[w.v]};
+    return collapseOf(u, w.v, w.placement);
+  }
+
+  // A refused vertex's place in the queue: the cost and target of its next collapse (the
+  // queue and requeueNextTo read no more of a refused vertex's best).
+  static Collapse queuedAt(const WaitingCollapse& w) {
+    Collapse c;
+    c.cost = w.cost;
+    c.v = w.v;
+    c.moves = w.placement != UntriedCollapse::kStays;
+    c.on_edge = w.placement == UntriedCollapse::kOnEdge;
+    return c;
   }
 
   // Tries u's collapses from the cheapest (the one it was queued at, then the others in order)
@@ -572,38 +608,48 @@ class ClusterCollapser {
       if (a_.waiting.size() + a_.targets.size() > a_.waiting.capacity()) compactWaiting();
       a_.refused[u] = 1;
       a_.waiting_next[u] = static_cast<std::uint32_t>(a_.waiting.size());
-      a_.waiting.insert(a_.waiting.end(), a_.targets.begin(), a_.targets.end());
+      for (const Collapse& c : a_.targets) a_.waiting.push_back({c.cost, c.v, placementOf(c)});
       a_.waiting_end[u] = static_cast<std::uint32_t>(a_.waiting.size());
     }
     while (a_.waiting_next[u] < a_.waiting_end[u]) {
-      const Collapse collapse = a_.waiting[a_.waiting_next[u]];
+      const WaitingCollapse waiting = a_.waiting[a_.waiting_next[u]];
       if (!a_.heap.empty()) {
         const std::uint32_t next = a_.heap.front().vertex;
         const double next_cost = a_.heap.front().cost;
-        if (collapse.cost > next_cost || (collapse.cost == next_cost && next < u)) {
-          queueAt(u, collapse);
+        if (waiting.cost > next_cost || (waiting.cost == next_cost && next < u)) {
+          queueAt(u, queuedAt(waiting));
           return false;
         }
       }
       ++a_.waiting_next[u];
-      if (accepts(u, collapse, out)) return true;
+      if (accepts(u, collapseOf(u, waiting), out)) return true;
     }
     return false;  // not queued again until a collapse changes its star
   }
 
-  // The waiting lists still in use, moved to the front of the pool; the pool doubles when
-  // they fill more than half of it.
+  // The waiting lists still in use, moved down to the front of the pool in their order (in
+  // place: each moves to or below where it is); the pool doubles when they fill more than
+  // half of it.
   void compactWaiting() {
-    a_.waiting_kept.clear();
+    a_.live_lists.clear();
     const auto vertices = static_cast<std::uint32_t>(a_.refused.size());
     for (std::uint32_t u = 0; u < vertices; ++u) {
-      if (!a_.refused[u] || a_.removed[u]) continue;
-      const std::uint32_t begin = a_.waiting_next[u], end = a_.waiting_end[u];
-      a_.waiting_next[u] = static_cast<std::uint32_t>(a_.waiting_kept.size());
-      a_.waiting_kept.insert(a_.waiting_kept.end(), a_.waiting.begin() + begin, a_.waiting.begin() + end);
-      a_.waiting_end[u] = static_cast<std::uint32_t>(a_.waiting_kept.size());
+      if (!a_.refused[u] || a_.removed[u] || a_.waiting_next[u] == a_.waiting_end[u]) {
+        a_.waiting_next[u] = a_.waiting_end[u] = 0;
+        continue;
+      }
+      a_.live_lists.emplace_back(a_.waiting_next[u], u);
     }
-    std::swap(a_.waiting, a_.waiting_kept);
+    std::sort(a_.live_lists.begin(), a_.live_lists.end());
+    std::uint32_t kept = 0;
+    for (const auto& [begin, u] : a_.live_lists) {
+      const std::uint32_t end = a_.waiting_end[u];
+      if (begin != kept) std::copy(a_.waiting.begin() + begin, a_.waiting.begin() + end, a_.waiting.begin() + kept);
+      a_.waiting_next[u] = kept;
+      kept += end - begin;
+      a_.waiting_end[u] = kept;
+    }
+    a_.waiting.resize(kept);
     const std::size_t wanted = std::max<std::size_t>(4096, 2 * (a_.waiting.size() + a_.targets.size()));
     if (a_.waiting.capacity() < wanted) a_.waiting.reserve(wanted);
   }
