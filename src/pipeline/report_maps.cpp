@@ -18,18 +18,16 @@ namespace {
 constexpr int kErrorClasses = 10;
 }  // namespace
 
-ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition,
-                      const TileFrame* frame, std::int32_t zoom, double error_scale_m, const ZoomSurface& surface,
-                      int max_side_px) {
+ClusterMap mapClusters(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition, int max_side_px) {
   const int scale = std::max(1, static_cast<int>(std::ceil(static_cast<double>(std::max(dem.width, dem.height)) /
                                                            std::max(16, max_side_px))));
   const int width = (dem.width + scale - 1) / scale, height = (dem.height + scale - 1) / scale;
-  ZoomMaps maps;
-  maps.zoom = zoom;
-  maps.error_scale_m = error_scale_m;
-  maps.cluster_count = partition ? partition->cluster_count : 0;
-  maps.clusters = RgbImage(width, height, 235);
-  maps.error = RgbImage(width, height, 235);
+  ClusterMap map;
+  map.width = width;
+  map.height = height;
+  map.scale = scale;
+  map.cluster_count = partition ? partition->cluster_count : 0;
+  map.by_cluster = partition != nullptr;
 
   // A map pixel shows the DEM pixel at its block's centre (the last block's centre clamped
   // into the raster).
@@ -88,16 +86,33 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
         }
       });
 
-  // Map pixel -> its cluster and its tile.
-  std::vector<std::int32_t> map_cluster(static_cast<std::size_t>(width) * height, -1);
+  // Map pixel -> its cluster.
+  map.cluster.assign(static_cast<std::size_t>(width) * height, -1);
+  for (std::size_t i = 0; i < map.cluster.size(); ++i) {
+    if (last_face[i] > 0) map.cluster[i] = partition ? partition->cluster_of_face[last_face[i] - 1] : 0;
+  }
+  return map;
+}
+
+ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const TileFrame* frame, std::int32_t zoom,
+                      double error_scale_m, const ZoomSurface& surface) {
+  const int scale = clusters.scale, width = clusters.width, height = clusters.height;
+  const std::vector<std::int32_t>& map_cluster = clusters.cluster;
+  const bool by_cluster = clusters.by_cluster;
+  ZoomMaps maps;
+  maps.zoom = zoom;
+  maps.error_scale_m = error_scale_m;
+  maps.cluster_count = clusters.cluster_count;
+  maps.clusters = RgbImage(width, height, 235);
+  maps.error = RgbImage(width, height, 235);
+  const auto centreCol = [&](int mx) { return std::min(dem.width - 1, mx * scale + scale / 2); };
+  const auto centreRow = [&](int my) { return std::min(dem.height - 1, my * scale + scale / 2); };
+
+  // Map pixel -> its tile.
   std::vector<GridPoint> centres;
   centres.reserve(map_cluster.size());
   for (int my = 0; my < height; ++my) {
     for (int mx = 0; mx < width; ++mx) {
-      const std::size_t i = static_cast<std::size_t>(my) * width + mx;
-      if (last_face[i] > 0) {
-        map_cluster[i] = partition ? partition->cluster_of_face[last_face[i] - 1] : 0;
-      }
       centres.push_back({static_cast<double>(centreCol(mx)), static_cast<double>(centreRow(my)), 0});
     }
   }
@@ -128,7 +143,7 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
       }
       const std::int32_t id = map_cluster[i];
       if (id < 0) continue;
-      const auto c = partition ? clusterColour(static_cast<std::uint32_t>(id))
+      const auto c = by_cluster ? clusterColour(static_cast<std::uint32_t>(id))
                                : clusterColour(static_cast<std::uint32_t>(tile[i].x * 7919 + tile[i].y));
       std::copy(c.begin(), c.end(), maps.clusters.at(mx, my));
     }
@@ -144,7 +159,7 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartiti
         if (mx + dx >= width || my + dy >= height) continue;
         const std::size_t j = static_cast<std::size_t>(my + dy) * width + mx + dx;
         if (map_cluster[j] < 0) continue;
-        cluster_border |= partition && map_cluster[j] != map_cluster[i];
+        cluster_border |= by_cluster && map_cluster[j] != map_cluster[i];
         tile_border |= frame && !(tile[j] == tile[i]);
       }
       std::uint8_t* p = maps.clusters.at(mx, my);

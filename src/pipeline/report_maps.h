@@ -25,11 +25,22 @@ struct ZoomMaps {
   std::int32_t cluster_count = 0;
 };
 
-// partition: a cluster per face of `mesh` (nullptr: faces coloured by tile instead).
+// The cluster map's content, taken from a zoom's mesh and partition as soon as its tiles are
+// assigned, so that the partition (4 bytes per face of every level) need not wait for the
+// error map: per map pixel, the cluster of the mesh's face covering its centre (the face
+// with the largest index), -1 where none does, 0 where one does and `partition` is nullptr
+// (then faces are coloured by tile).
+struct ClusterMap {
+  int width = 0, height = 0, scale = 1;  // the map's pixels, and the DEM pixels a side of one covers
+  std::vector<std::int32_t> cluster;     // per map pixel, row by row
+  std::int32_t cluster_count = 0;
+  bool by_cluster = false;  // false: coloured by tile
+};
+ClusterMap mapClusters(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition, int max_side_px = 640);
+
 // frame: draws the zoom's tile outlines (nullptr: none). surface: the zoom's drawn surface
 // (its tiles as decoded, measured along every pixel's vertical), for the error map.
-ZoomMaps drawZoomMaps(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition,
-                      const TileFrame* frame, std::int32_t zoom, double error_scale_m, const ZoomSurface& surface,
-                      int max_side_px = 640);
+ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const TileFrame* frame, std::int32_t zoom,
+                      double error_scale_m, const ZoomSurface& surface);
 
 }  // namespace terratiles

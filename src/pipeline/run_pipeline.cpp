@@ -346,9 +346,10 @@ struct ZoomContent {
   // locked vertices a tile outline runs along live on); nullptr on the coarsest zoom and for
   // the grid pyramid.
   const std::vector<std::uint32_t>* index_in_coarser = nullptr;
-  // For the report's map: the clusters its tiles are made of (the finer level's, carried
-  // over; on the finest level its own); nullptr for the grid pyramid.
-  const FacePartition* map_clusters = nullptr;
+  // For the report's map (empty without a report): the clusters its tiles are made of (the
+  // finer level's, carried over; on the finest level its own; none for the grid pyramid),
+  // taken when the tiles are assigned.
+  ClusterMap cluster_map;
   std::vector<PyramidTile> tiles;
 };
 
@@ -483,6 +484,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.step = level.step;
       content.mesh = &level.mesh;
       content.tiles = std::move(level.tiles);
+      if (options.report) content.cluster_map = mapClusters(dem, level.mesh, nullptr);
       zooms.push_back(std::move(content));
     }
   } else {
@@ -525,9 +527,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.clusters = static_cast<std::size_t>(levels[l].partition.cluster_count);
       content.mesh = &levels[l].mesh;
       if (l + 1 < levels.size()) content.index_in_coarser = &levels[l].index_in_coarser;
-      FacePartition* map_clusters = !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
-                                    : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
-                                                                                         : nullptr;
+      const FacePartition* map_clusters =
+          !levels[l].inherited_partition.cluster_of_face.empty() ? &levels[l].inherited_partition
+          : !levels[l].partition.cluster_of_face.empty()      ? &levels[l].partition
+                                                               : nullptr;
       for (TileFaces& tile : assignClusters(*frame, levels[l], zoom, options.assignment, finer_cluster_tiles,
                                             own_cluster_tiles)) {
         PyramidTile pyramid_tile;
@@ -535,12 +538,11 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         pyramid_tile.faces = std::move(tile.faces);
         content.tiles.push_back(std::move(pyramid_tile));
       }
-      // The level's partitions served the assignment; the report's maps draw one of them.
-      if (!options.report) map_clusters = nullptr;
+      // The level's partitions served the assignment and, for the report, the cluster map.
+      if (options.report) content.cluster_map = mapClusters(dem, levels[l].mesh, map_clusters);
       for (FacePartition* partition : {&levels[l].partition, &levels[l].inherited_partition}) {
-        if (partition != map_clusters) partition->cluster_of_face = std::vector<std::int32_t>();
+        partition->cluster_of_face = std::vector<std::int32_t>();
       }
-      content.map_clusters = map_clusters;
       finer_cluster_tiles = std::move(own_cluster_tiles);
       zooms.push_back(std::move(content));
       progress.advance();
@@ -661,7 +663,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   const auto releaseZoom = [&](std::size_t k) {
     for (PyramidTile& tile : zooms[k].tiles) tile.faces = std::vector<std::uint32_t>();
     zooms[k].mesh = nullptr;
-    zooms[k].map_clusters = nullptr;
+    zooms[k].cluster_map = ClusterMap();
     if (options.lod == LodMethod::Grid) {
       pyramid.levels[k].mesh = TinMesh();
     } else {
@@ -757,7 +759,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         finished_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
         if (options.report) {
           const ZoomContent& finished = zooms[k];
-          maps[k] = drawZoomMaps(dem, *finished.mesh, finished.map_clusters, frame.get(), finished.zoom,
+          maps[k] = drawZoomMaps(dem, finished.cluster_map, frame.get(), finished.zoom,
                                  finished_summary.max_error_m, drawn);
         }
       });
