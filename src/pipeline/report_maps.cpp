@@ -16,6 +16,10 @@
 namespace terratiles {
 namespace {
 constexpr int kErrorClasses = 10;
+
+// A map pixel shows the DEM pixel at its block's centre (the last block's centre clamped
+// into the raster): along one axis of `size` DEM pixels, map pixel m's.
+int blockCentre(int m, int scale, int size) { return std::min(size - 1, m * scale + scale / 2); }
 }  // namespace
 
 ClusterMap mapClusters(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition, int max_side_px) {
@@ -29,10 +33,8 @@ ClusterMap mapClusters(const DemGrid& dem, const TinMesh& mesh, const FacePartit
   map.cluster_count = partition ? partition->cluster_count : 0;
   map.by_cluster = partition != nullptr;
 
-  // A map pixel shows the DEM pixel at its block's centre (the last block's centre clamped
-  // into the raster).
-  const auto centreCol = [&](int mx) { return std::min(dem.width - 1, mx * scale + scale / 2); };
-  const auto centreRow = [&](int my) { return std::min(dem.height - 1, my * scale + scale / 2); };
+  const auto centreCol = [&](int mx) { return blockCentre(mx, scale, dem.width); };
+  const auto centreRow = [&](int my) { return blockCentre(my, scale, dem.height); };
   // The map pixels whose centres lie in [first, last] along one axis (centres ascend).
   const auto centresWithin = [&](int first, int last, int count, auto centre) {
     int lo = std::max(0, (first - scale / 2 + scale - 1) / scale);
@@ -105,15 +107,13 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const Tile
   maps.cluster_count = clusters.cluster_count;
   maps.clusters = RgbImage(width, height, 235);
   maps.error = RgbImage(width, height, 235);
-  const auto centreCol = [&](int mx) { return std::min(dem.width - 1, mx * scale + scale / 2); };
-  const auto centreRow = [&](int my) { return std::min(dem.height - 1, my * scale + scale / 2); };
-
   // Map pixel -> its tile.
   std::vector<GridPoint> centres;
   centres.reserve(map_cluster.size());
   for (int my = 0; my < height; ++my) {
     for (int mx = 0; mx < width; ++mx) {
-      centres.push_back({static_cast<double>(centreCol(mx)), static_cast<double>(centreRow(my)), 0});
+      centres.push_back({static_cast<double>(blockCentre(mx, scale, dem.width)),
+                         static_cast<double>(blockCentre(my, scale, dem.height)), 0});
     }
   }
   std::vector<TileKey> tile(map_cluster.size());

@@ -119,20 +119,19 @@ struct ClusterArrays {
     EcefPoint ecef;
   };
   std::vector<PlacedPoint> placed_points = std::vector<PlacedPoint>(65536);
-  // Quadric optima of edges between free vertices, by the edge's ends and their versions
-  // (direct-mapped): an edge's optimum (the same from either end: Q_u + Q_v has the same bits
-  // as Q_v + Q_u) is asked for by both ends when they are queued, and again whenever a
-  // collapse next to an end queues it again, but changes only when a collapse changes an end
-  // (its version: a collapse into v gives v a new quadric, and may move it). `generation`
-  // tells the clusters (and a split cluster's two runs) apart.
+  // Quadric optima of edges between free vertices, by the edge's ends and when they last
+  // changed (changed_at; direct-mapped): an edge's optimum (the same from either end: Q_u +
+  // Q_v has the same bits as Q_v + Q_u) is asked for by both ends when they are queued, and
+  // again whenever a collapse next to an end queues it again, but changes only when a
+  // collapse changes an end (a collapse into v gives v a new quadric, and may move it).
+  // `generation` tells the clusters (and a split cluster's two runs) apart.
   struct EdgeOptimum {
-    std::uint32_t lo = kNone, hi = kNone, lo_version = 0, hi_version = 0, generation = 0;
+    std::uint32_t lo = kNone, hi = kNone, lo_changed_at = 0, hi_changed_at = 0, generation = 0;
     bool moves = false;  // false: no optimum (ill-conditioned, or at an end)
     double cost = 0;
     GridPoint placed;
   };
   std::vector<EdgeOptimum> edge_optima = std::vector<EdgeOptimum>(16384);
-  std::vector<std::uint32_t> version;  // per local vertex
   std::uint32_t generation = 0;
   // Collapses the filter refused, by (u, v, placement) (direct-mapped): the new triangle that
   // failed, made from `triangle` of u's star (or v's, when v moves), and the count of
@@ -145,7 +144,7 @@ struct ClusterArrays {
     bool for_error = false;
   };
   std::vector<Refusal> refusals = std::vector<Refusal>(16384);
-  std::vector<std::uint32_t> changed_at;  // per local vertex: the count of collapses applied when its quadric or place last changed
+  std::vector<std::uint32_t> changed_at;  // per local vertex: the count of collapses applied when its quadric or place last changed (0: never)
 };
 
 // How a cluster is loaded besides its faces: for a part of a split cluster, and for the whole
@@ -325,10 +324,11 @@ class ClusterCollapser {
     const std::uint32_t lo = std::min(u, v), hi = std::max(u, v);
     const std::uint64_t hash = (std::uint64_t{lo} * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t{hi} * 0xC2B2AE3D27D4EB4Full);
     ClusterArrays::EdgeOptimum& entry = a_.edge_optima[(hash >> 32) & (a_.edge_optima.size() - 1)];
-    if (entry.lo != lo || entry.hi != hi || entry.lo_version != a_.version[lo] || entry.hi_version != a_.version[hi] ||
+    if (entry.lo != lo || entry.hi != hi || entry.lo_changed_at != a_.changed_at[lo] ||
+        entry.hi_changed_at != a_.changed_at[hi] ||
         entry.generation != a_.generation) {
       const Collapse optimum = quadricOptimum(q ? *q : combined(u, v), u, v);
-      entry = {lo, hi, a_.version[lo], a_.version[hi], a_.generation, optimum.moves, optimum.cost, optimum.placed};
+      entry = {lo, hi, a_.changed_at[lo], a_.changed_at[hi], a_.generation, optimum.moves, optimum.cost, optimum.placed};
     }
     Collapse collapse;
     if (entry.moves) collapse = {entry.cost, v, true, false, entry.placed};
@@ -523,7 +523,6 @@ class ClusterCollapser {
     for (std::uint32_t v = 0; v < vertices; ++v) a_.absorbed_last[v] = v;
     a_.removed.assign(vertices, 0);
     a_.broken_pixel.assign(vertices, kNoPixel);
-    a_.version.assign(vertices, 0);
     a_.changed_at.assign(vertices, 0);
     applied_ = 0;
     if (++a_.generation == 0) {  // wrapped: forget every entry
@@ -659,9 +658,7 @@ class ClusterCollapser {
         (std::uint64_t{u} * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t{v_and_placement} * 0xC2B2AE3D27D4EB4Full);
     return a_.refusals[(hash >> 32) & (a_.refusals.size() - 1)];
   }
-  static std::uint32_t vAndPlacement(const Collapse& c) {
-    return (c.v << 2) | (c.on_edge ? 2u : c.moves ? 1u : 0u);
-  }
+  static std::uint32_t vAndPlacement(const Collapse& c) { return (c.v << 2) | placementOf(c); }
   // The filter refused this collapse before and it would make the same failing triangle now.
   bool refusedAgain(const ClusterArrays::Refusal& r, std::uint32_t u, std::uint32_t v_and_placement) const {
     if (r.u != u || r.v_and_placement != v_and_placement || r.generation != a_.generation) return false;
@@ -838,8 +835,7 @@ class ClusterCollapser {
       if (options_.globe) a_.ecef[v] = placed_ecef;
     }
     a_.removed[u] = 1;
-    a_.changed_at[v] = ++applied_;
-    ++a_.version[v];  // a new quadric, maybe a new place: its edges' optima change
+    a_.changed_at[v] = ++applied_;  // a new quadric, maybe a new place: its edges' optima change
     a_.absorbed_next[a_.absorbed_last[v]] = u;
     a_.absorbed_last[v] = a_.absorbed_last[u];
     edges_ -= 3;
