@@ -1,6 +1,5 @@
 #pragma once
-// readDem: reads one or several adjacent DEM rasters (GeoTIFF or anything GDAL reads) into
-// one DemGrid mosaic.
+// Reading DEM rasters (GeoTIFF or anything GDAL reads, a GDAL VRT too) as one mosaic.
 //
 // Every input must be north-up with square pixels, carry a CRS, and share the CRS and pixel
 // size of the first input; inputs must sit on the same pixel lattice (offsets a whole number
@@ -8,19 +7,69 @@
 // value wins; pixels no input covers, nodata values and non-finite values become NaN.
 // Throws Error(Input) with a one-line message naming the file, what was found and what was
 // expected, and how to fix it.
+//
+// scanDemMosaic reads only the inputs' headers (each file is opened, checked and closed, so
+// tens of thousands of files are fine); readDemWindow then reads any window of the mosaic,
+// opening only the files it overlaps. readDem reads the whole mosaic at once.
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
+#include "src/base/progress.h"
 #include "src/dem/dem_grid.h"
 
 namespace terratiles {
 
+// One input raster and where it sits on the mosaic's pixel lattice.
+struct MosaicRaster {
+  std::string path;
+  std::int64_t col0 = 0;  // its north-west pixel, in mosaic pixels
+  std::int64_t row0 = 0;
+  std::int32_t width = 0;
+  std::int32_t height = 0;
+};
+
+// A window of the mosaic in its pixels; it may reach past the mosaic (read as nodata).
+struct PixelWindow {
+  std::int64_t col0 = 0;
+  std::int64_t row0 = 0;
+  std::int32_t width = 0;
+  std::int32_t height = 0;
+};
+
+// The inputs as one pixel lattice, without their pixels.
+struct DemMosaic {
+  std::vector<MosaicRaster> rasters;  // in input order: where they overlap, the first valid value wins
+  std::int64_t width = 0;             // pixels of the union of the inputs
+  std::int64_t height = 0;
+  double origin_x = 0;  // north-west corner, CRS units
+  double origin_y = 0;
+  double pixel_size = 1;
+  std::string crs_wkt;   // WKT2 of the horizontal CRS
+  std::string crs_name;  // e.g. "EPSG:2056"
+};
+
+// Checks every input against the first and lays them out; with `progress` and more than one
+// input, a stage counts the files.
+DemMosaic scanDemMosaic(const std::vector<std::string>& paths, Progress* progress = nullptr);
+
+// The heights of `window`, as a DemGrid whose origin is the window's corner.
+DemGrid readDemWindow(const DemMosaic& mosaic, const PixelWindow& window);
+
 struct ReadDemOptions {
   // Refuse mosaics larger than this many pixels (the in-memory path); 0 = no limit.
   std::size_t max_pixels = 400'000'000;
+  Progress* progress = nullptr;  // advanced once per input file read
 };
 
+// The whole mosaic; throws Error(Input) when every pixel is nodata.
+DemGrid readDem(const DemMosaic& mosaic, const ReadDemOptions& options = {});
+// scanDemMosaic, then readDem.
 DemGrid readDem(const std::vector<std::string>& paths, const ReadDemOptions& options = {});
+// The same, shown on `progress`: a stage "scanning N inputs" when there are several, then
+// `stage` counting the files read, which the caller ends (it may read more inside it, such as
+// the geoid).
+DemGrid readDem(const std::vector<std::string>& paths, const std::string& stage, Progress& progress);
 
 }  // namespace terratiles

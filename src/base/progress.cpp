@@ -82,9 +82,13 @@ void Progress::advance(std::uint64_t steps) {
   last_permille_ = permille;
   last_draw_ = now;
   if (mode_ == ProgressMode::Json) {
-    std::fprintf(stream_, "{\"event\":\"progress\",\"stage\":\"%s\",\"done\":%llu,\"total\":%llu}\n",
+    const double seconds = std::chrono::duration<double>(now - stage_start_).count();
+    const double eta = remainingSeconds(now);
+    char eta_text[48] = "";
+    if (eta >= 0) std::snprintf(eta_text, sizeof eta_text, ",\"eta_seconds\":%.1f", eta);
+    std::fprintf(stream_, "{\"event\":\"progress\",\"stage\":\"%s\",\"done\":%llu,\"total\":%llu,\"seconds\":%.3f%s}\n",
                  jsonEscape(stage_).c_str(), static_cast<unsigned long long>(done_),
-                 static_cast<unsigned long long>(total_));
+                 static_cast<unsigned long long>(total_), seconds, eta_text);
     std::fflush(stream_);
   } else {
     draw(false);
@@ -120,6 +124,12 @@ void Progress::note(const std::string& message) {
   std::fflush(stream_);
 }
 
+double Progress::remainingSeconds(std::chrono::steady_clock::time_point now) const {
+  if (total_ == 0 || done_ == 0 || done_ >= total_) return -1;
+  const double seconds = std::chrono::duration<double>(now - stage_start_).count();
+  return seconds * static_cast<double>(total_ - done_) / static_cast<double>(done_);
+}
+
 void Progress::draw(bool final_line) {
   if (mode_ != ProgressMode::Bar) return;
   constexpr int kWidth = 30;
@@ -129,8 +139,20 @@ void Progress::draw(bool final_line) {
   const int filled = static_cast<int>(fraction * kWidth);
   std::string bar(static_cast<size_t>(filled), '#');
   bar.resize(kWidth, '.');
-  std::fprintf(stream_, "\r\033[K%-22s [%s] %3d%%", stage_.c_str(), bar.c_str(),
-               static_cast<int>(fraction * 100));
+  // The time left, once the stage has run a second (earlier rates say little).
+  char eta_text[40] = "";
+  const auto now = std::chrono::steady_clock::now();
+  const double eta = final_line ? -1 : remainingSeconds(now);
+  if (eta >= 0 && now - stage_start_ >= std::chrono::seconds(1)) {
+    const auto whole = static_cast<long long>(eta + 0.5);
+    if (whole >= 3600) {
+      std::snprintf(eta_text, sizeof eta_text, "  %lldh%02lldm left", whole / 3600, whole / 60 % 60);
+    } else {
+      std::snprintf(eta_text, sizeof eta_text, "  %lldm%02llds left", whole / 60, whole % 60);
+    }
+  }
+  std::fprintf(stream_, "\r\033[K%-22s [%s] %3d%%%s", stage_.c_str(), bar.c_str(),
+               static_cast<int>(fraction * 100), eta_text);
   std::fflush(stream_);
 }
 

@@ -1,8 +1,9 @@
 #pragma once
 // Progress reporting for long stages, always on stderr (stdout stays for data).
 //
-// Modes: Bar draws a live bar per stage (for terminals), Json writes one JSON object per line
-// per step (for machines), Quiet writes nothing. Progress also carries the cancellation flag:
+// Modes: Bar draws a live bar per stage (for terminals) with the time left once a stage has run
+// a second, Json writes one JSON object per line per step (for machines; progress events carry
+// the stage's seconds so far and, once a step is done, eta_seconds), Quiet writes nothing. Progress also carries the cancellation flag:
 // every call to advance() throws Error(Cancelled) once requestCancel() was called (from the
 // SIGINT handler), so long loops stop at the next step.
 
@@ -54,6 +55,8 @@ class Progress {
 
  private:
   void draw(bool final_line);
+  // Seconds the current stage still needs at its rate so far; -1 when unknown.
+  double remainingSeconds(std::chrono::steady_clock::time_point now) const;
 
   ProgressMode mode_;
   std::FILE* stream_;

@@ -145,8 +145,7 @@ json reportFromDisk(const fs::path& dir, Progress& progress) {
   report["options"] = options;
 
   const std::vector<std::string> inputs = build.at("inputs").get<std::vector<std::string>>();
-  progress.beginStage("reading the DEM", 0);
-  const DemGrid dem = readDem(inputs);
+  const DemGrid dem = readDem(inputs, "reading the DEM", progress);
   progress.endStage();
   const DemStatistics stats = computeStatistics(dem);
   report["input"] = {{"files", inputs},
@@ -221,7 +220,7 @@ json buildReportJson(const BuildOptions& options, const BuildSummary& s, const s
   report["output_dir"] = fs::absolute(s.output_dir).string();
   report["options"] = optionsJson(options);
   std::vector<std::string> files;
-  for (const std::string& input : options.inputs) files.push_back(fs::absolute(input).string());
+  for (const std::string& input : options.inputs) files.push_back(fs::absolute(input).lexically_normal().string());
   const double pixels = static_cast<double>(s.width) * static_cast<double>(s.height);
   report["input"] = {{"files", files},
                      {"crs", s.crs_name},

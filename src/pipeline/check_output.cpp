@@ -492,8 +492,7 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   addTile(build.contains("explicit_tileset") ? build["explicit_tileset"].at("root") : tileset.at("root"), -1, tiles);
 
   std::vector<std::string> inputs = build.at("inputs").get<std::vector<std::string>>();
-  progress.beginStage("reading the DEM", 0);
-  const DemGrid dem = readDem(inputs);
+  const DemGrid dem = readDem(inputs, "reading the DEM", progress);
   std::optional<GeoidGrid> geoid;
   if (build.value("heights", std::string("orthometric")) == "orthometric") {
     geoid = readGeoidGrid(build.at("geoid").get<std::string>());

@@ -65,8 +65,17 @@ std::string field(const json& object, const std::string& key, int digits = 3) {
   if (v.is_boolean()) return v.get<bool>() ? "yes" : "no";
   if (v.is_string()) return escape(v.get<std::string>());
   if (v.is_array()) {
+    // A country's thousands of input files: the first and last few, and how many between.
+    constexpr std::size_t kShown = 4;
     std::string out;
-    for (const json& item : v) out += (out.empty() ? "" : "<br>") + escape(item.is_string() ? item.get<std::string>() : item.dump());
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      if (v.size() > 3 * kShown && i == kShown) {
+        out += "<br>&hellip; " + grouped(v.size() - 2 * kShown) + " more &hellip;";
+        i = v.size() - kShown;
+      }
+      const json& item = v[i];
+      out += (out.empty() ? "" : "<br>") + escape(item.is_string() ? item.get<std::string>() : item.dump());
+    }
     return out.empty() ? "none" : out;
   }
   return escape(v.dump());

@@ -424,8 +424,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   validateOptions(options);
   OutputDirectory output(options.output_dir, options.force);
 
-  progress.beginStage("reading DEM", 0);
-  const DemGrid dem = readDem(options.inputs);
+  const DemGrid dem = readDem(options.inputs, "reading DEM", progress);
   const DemStatistics stats = computeStatistics(dem);
   const CrsToWgs84 to_wgs84(dem.crs_wkt);
   std::optional<GeoidGrid> geoid;
@@ -858,7 +857,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     nlohmann::json facts;
     facts["generator"] = glb.generator;
     std::vector<std::string> inputs;
-    for (const std::string& input : options.inputs) inputs.push_back(std::filesystem::absolute(input).string());
+    for (const std::string& input : options.inputs) inputs.push_back(std::filesystem::absolute(input).lexically_normal().string());
     facts["inputs"] = inputs;
     facts["crs"] = dem.crs_name;
     facts["lod"] = options.lod == LodMethod::Grid ? "grid" : "clusters";

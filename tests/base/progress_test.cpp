@@ -1,6 +1,8 @@
 #include <doctest/doctest.h>
 
+#include <chrono>
 #include <cstdio>
+#include <thread>
 #include <string>
 
 #include "src/base/error.h"
@@ -33,6 +35,24 @@ TEST_SUITE("base") {
     CHECK(text.find("{\"event\":\"stage\",\"stage\":\"tiles \\\"x\\\"\",\"total\":3}\n") == 0);
     CHECK(text.find("\"event\":\"progress\"") != std::string::npos);
     CHECK(text.find("\"event\":\"stage_done\"") != std::string::npos);
+  }
+
+  TEST_CASE("json progress gives the time a stage still needs at its rate so far") {
+    std::FILE* file = std::tmpfile();
+    {
+      Progress progress(ProgressMode::Json, file);
+      progress.beginStage("blocks", 4);
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      progress.advance();  // a quarter done after 0.2 s: about 0.6 s left
+    }
+    const std::string text = readAll(file);
+    std::fclose(file);
+    const std::size_t at = text.find("\"eta_seconds\":");
+    REQUIRE(at != std::string::npos);
+    const double eta = std::stod(text.substr(at + 14));
+    CHECK(eta >= 0.55);
+    CHECK(eta < 10.0);
+    CHECK(text.find("\"seconds\":") != std::string::npos);
   }
 
   TEST_CASE("quiet progress writes nothing") {

@@ -74,7 +74,7 @@ TEST_SUITE("cli") {
 
     const auto missing = runTerratiles({"build", "/nonexistent/dem.tif", "-o", out});
     CHECK(missing.exit_code == 3);
-    checkOneLineError(missing, "/nonexistent/dem.tif: no such file; check the path");
+    checkOneLineError(missing, "/nonexistent/dem.tif: no such file or directory; check the path");
 
     std::ofstream(dir / "notes.txt") << "this is not a raster\n";
     const auto not_raster = runTerratiles({"build", dir / "notes.txt", "-o", out});

@@ -911,8 +911,7 @@ ChordReport measureChordGeometry(const std::string& output_dir, const ChordOptio
   if (inputs.empty()) throw Error(ErrorCode::Input, output_dir + ": build.json names no input DEM");
   for (std::size_t i = 0; i < inputs.size(); ++i) report.dem += (i ? ", " : "") + inputs[i];
 
-  progress.beginStage("reading the DEM", 0);
-  const DemGrid dem = readDem(inputs);
+  const DemGrid dem = readDem(inputs, "reading the DEM", progress);
   std::optional<GeoidGrid> geoid;
   if (heights == "orthometric") {
     geoid = readGeoidGrid(geoid_path);

@@ -25,6 +25,7 @@
 #include "src/base/version.h"
 #include "src/geo/point_transform.h"
 #include "src/pipeline/run_pipeline.h"
+#include "formats/dem/dem_inputs.h"
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
 #include "formats/output_directory.h"
@@ -256,6 +257,23 @@ struct HeightChoice {
   }
 };
 
+// INPUT... and --input-list, as build, tin and levels take them (see expandDemInputs).
+struct InputChoice {
+  std::vector<std::string> arguments;
+  std::string list_path;
+  std::vector<std::string> files() const { return expandDemInputs(arguments, list_path); }
+};
+
+void addInputOptions(CLI::App& command, InputChoice& choice) {
+  command.add_option("INPUT", choice.arguments,
+                     "DEM rasters GDAL reads (GeoTIFF, .hgt, a VRT, ...), any CRS with an EPSG code, or directories "
+                     "of them (every .tif, .tiff, .vrt, .hgt, ... file directly inside); adjacent files that share "
+                     "CRS, pixel size and lattice are mosaicked, the first valid value winning where they overlap");
+  command.add_option("--input-list", choice.list_path,
+                     "A text file naming more inputs, one path per line (relative to the current directory; blank "
+                     "lines and lines starting with # ignored): for more files than a shell passes as arguments");
+}
+
 void addHeightOptions(CLI::App& command, std::string& heights, std::string& geoid_path) {
   command
       .add_option("--heights", heights,
@@ -300,8 +318,7 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   if (std::filesystem::exists(options.output, ec) && !options.force) {
     throw Error(ErrorCode::Output, options.output + ": file exists; use --force to replace it");
   }
-  progress.beginStage("reading DEM", 0);
-  DemGrid dem = readDem(options.inputs);
+  DemGrid dem = readDem(options.inputs, "reading DEM", progress);
   const std::optional<GeoidGrid> geoid = options.heights.geoid();
   progress.endStage();
   TinErrorStatistics errors;
@@ -364,8 +381,7 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
     thread_limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(options.threads));
   }
   OutputDirectory directory(options.output, options.force, "levels.json");
-  progress.beginStage("reading DEM", 0);
-  const DemGrid dem = readDem(options.inputs);
+  const DemGrid dem = readDem(options.inputs, "reading DEM", progress);
   const std::optional<GeoidGrid> geoid = options.heights.geoid();
   progress.endStage();
   const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
@@ -474,11 +490,8 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   CLI::App* build_command = app.add_subcommand(
       "build", "Turn one or several adjacent DEM rasters into a 3D Tiles tileset");
   build_command->footer(kExitCodes);
-  build_command
-      ->add_option("INPUT", build.inputs,
-                   "DEM rasters GDAL reads (GeoTIFF, .hgt, ...), any CRS with an EPSG code; "
-                   "several adjacent files are mosaicked")
-      ->required();
+  InputChoice build_inputs;
+  addInputOptions(*build_command, build_inputs);
   build_command->add_option("-o,--output", build.output_dir, "Output directory (tileset.json, tiles/)")
       ->required();
   build_command->add_flag("-f,--force", build.force,
@@ -605,8 +618,8 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   CLI::App* tin_command = app.add_subcommand(
       "tin", "Turn DEM rasters into one TIN by greedy insertion, written as OFF, OBJ or PLY");
   tin_command->footer(kExitCodes);
-  tin_command->add_option("INPUT", tin.inputs, "DEM rasters (as for build); adjacent files are mosaicked")
-      ->required();
+  InputChoice tin_inputs;
+  addInputOptions(*tin_command, tin_inputs);
   tin_command
       ->add_option("-o,--output", tin.output,
                    "Output TIN file, .off, .obj or .ply (binary), coordinates in the DEM's CRS")
@@ -625,8 +638,8 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       "levels", "Build the cluster levels of detail (METIS clusters, CGAL edge collapse with "
                 "locked borders, re-partition per level) and write each level as a TIN file");
   levels_command->footer(kExitCodes);
-  levels_command->add_option("INPUT", levels.inputs, "DEM rasters (as for build); adjacent files are mosaicked")
-      ->required();
+  InputChoice levels_inputs;
+  addInputOptions(*levels_command, levels_inputs);
   levels_command
       ->add_option("-o,--output", levels.output,
                    "Output directory: level_0 (the finest TIN) .. level_N files and levels.json")
@@ -767,12 +780,14 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   if (levels_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
+    levels.inputs = levels_inputs.files();
     runLevelsCommand(levels, progress, quiet, err);
     return 0;
   }
   if (tin_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
+    tin.inputs = tin_inputs.files();
     runTinCommand(tin, progress, quiet, err);
     return 0;
   }
@@ -781,6 +796,7 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     return 0;
   }
   if (build_command->parsed()) {
+    build.inputs = build_inputs.files();
     build.lod = lod_choice == "grid" ? LodMethod::Grid : LodMethod::Clusters;
     build.simplifier = parseSimplifier(build_simplifier);
     build.global_partition = build_partition == "global";

@@ -1,0 +1,167 @@
+// Inputs at scale: a raster cut into many files (as gdal_translate -srcwin cuts it), given as
+// the files, a directory, an input list or a GDAL VRT of the pieces, builds the same bytes
+// as the raster in one file, and `terratiles check` reads the pieces back.
+#include <doctest/doctest.h>
+
+#include <gdal_priv.h>
+#include <gdal_utils.h>
+
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "src/base/progress.h"
+#include "src/pipeline/check_output.h"
+#include "tests/test_support.h"
+
+using namespace terratiles;
+namespace fs = std::filesystem;
+
+namespace {
+
+// gdal_translate -srcwin, in-process: cuts `source` into a columns x rows grid of GeoTIFFs in
+// `dir` (the last column and row take the remainder). Returns their paths, row by row.
+std::vector<std::string> cutIntoPieces(const std::string& source, int columns, int rows, const fs::path& dir) {
+  GDALAllRegister();
+  GDALDatasetH dataset = GDALOpen(source.c_str(), GA_ReadOnly);
+  REQUIRE(dataset != nullptr);
+  const int width = GDALGetRasterXSize(dataset), height = GDALGetRasterYSize(dataset);
+  const int piece_width = width / columns, piece_height = height / rows;
+  std::vector<std::string> pieces;
+  for (int row = 0; row < rows; ++row) {
+    for (int column = 0; column < columns; ++column) {
+      const int x = column * piece_width, y = row * piece_height;
+      const int w = column + 1 == columns ? width - x : piece_width;
+      const int h = row + 1 == rows ? height - y : piece_height;
+      const std::vector<std::string> words{"-q", "-srcwin", std::to_string(x), std::to_string(y), std::to_string(w),
+                                           std::to_string(h)};
+      std::vector<char*> argv;
+      for (const std::string& word : words) argv.push_back(const_cast<char*>(word.c_str()));
+      argv.push_back(nullptr);
+      GDALTranslateOptions* options = GDALTranslateOptionsNew(argv.data(), nullptr);
+      const std::string path = (dir / ("piece_" + std::to_string(row) + "_" + std::to_string(column) + ".tif")).string();
+      int failed = 0;
+      GDALDatasetH piece = GDALTranslate(path.c_str(), dataset, options, &failed);
+      GDALTranslateOptionsFree(options);
+      REQUIRE(piece != nullptr);
+      REQUIRE(failed == 0);
+      GDALClose(piece);
+      pieces.push_back(path);
+    }
+  }
+  GDALClose(dataset);
+  return pieces;
+}
+
+// gdalbuildvrt, in-process.
+void buildVrt(const std::string& path, const std::vector<std::string>& sources) {
+  std::vector<const char*> names;
+  for (const std::string& source : sources) names.push_back(source.c_str());
+  int failed = 0;
+  GDALDatasetH vrt = GDALBuildVRT(path.c_str(), static_cast<int>(names.size()), nullptr, names.data(), nullptr, &failed);
+  REQUIRE(vrt != nullptr);
+  REQUIRE(failed == 0);
+  GDALClose(vrt);
+}
+
+// The tiles and tileset.json of an output (build.json and the report name the inputs).
+std::map<std::string, std::string> tileBytes(const fs::path& out) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(out)) {
+    const std::string relative = fs::relative(entry.path(), out).string();
+    if (!entry.is_regular_file() || (relative != "tileset.json" && relative.rfind("tiles/", 0) != 0)) continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    files[relative] = std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  return files;
+}
+
+void checkSameBytes(const std::map<std::string, std::string>& expected, const std::map<std::string, std::string>& found) {
+  REQUIRE(expected.size() == found.size());
+  for (const auto& [path, bytes] : expected) {
+    CAPTURE(path);
+    REQUIRE(found.count(path) == 1);
+    CHECK(found.at(path) == bytes);
+  }
+}
+
+}  // namespace
+
+TEST_SUITE("cli") {
+  TEST_CASE("SRTM Gabon cut into 48 files builds the same tiles as one file, from a directory, a list or a VRT") {
+    test::TempDir dir;
+    const std::string gabon = test::sharedData("srtm3_N00E010-E011_4326.tif");
+    fs::create_directories(dir.path() / "pieces");
+    const std::vector<std::string> pieces = cutIntoPieces(gabon, 8, 6, dir.path() / "pieces");
+    REQUIRE(pieces.size() == 48);
+    // gdalbuildvrt recomputes the pixel size (8.3333333333333252e-04 instead of the pieces'
+    // 8.333333333333e-04 degrees): the build reads such a VRT through its sources.
+    buildVrt(dir / "pieces.vrt", pieces);
+    {
+      std::ofstream list(dir / "pieces.txt");
+      list << "# the pieces, one per line\n\n";
+      for (const std::string& piece : pieces) list << piece << "\n";
+    }
+
+    // 20 m keeps each build to a few seconds; the report (and its check) only where it is
+    // asserted below.
+    const auto build = [&](std::vector<std::string> inputs, const std::string& name, bool report) {
+      std::vector<std::string> args{"build"};
+      args.insert(args.end(), inputs.begin(), inputs.end());
+      for (const char* option : {"-q", "--tin-max-error", "20"}) args.push_back(option);
+      if (!report) args.push_back("--no-report");
+      args.push_back("-o");
+      args.push_back(dir / name);
+      const auto result = test::runTerratiles(args);
+      CAPTURE(result.err);
+      REQUIRE(result.exit_code == 0);
+      return tileBytes(dir.path() / name);
+    };
+    const auto whole = build({gabon}, "whole", false);
+    REQUIRE(whole.size() > 50);
+    checkSameBytes(whole, build(pieces, "files", false));
+    checkSameBytes(whole, build({dir / "pieces"}, "directory", true));
+    checkSameBytes(whole, build({"--input-list", dir / "pieces.txt"}, "list", false));
+    checkSameBytes(whole, build({dir / "pieces.vrt"}, "vrt", false));
+
+    // The check reads the 48 pieces the build recorded, and finds the output seamless.
+    Progress quiet;
+    CheckOptions options;
+    options.cuts = 300;
+    test::checkSeamless(checkOutput(dir / "directory", options, quiet));
+  }
+
+  TEST_CASE("inputs that are no mosaic are refused before anything is written") {
+    test::TempDir dir;
+    fs::create_directories(dir.path() / "empty");
+    {
+      std::ofstream(dir / "empty/readme.txt") << "no rasters here\n";
+    }
+    auto result = test::runTerratiles({"build", dir / "empty", "-o", dir / "out"});
+    CHECK(result.exit_code == 3);
+    CHECK(result.err.find("empty: directory holds no raster files") != std::string::npos);
+    CHECK(result.err.find("--input-list") != std::string::npos);
+
+    {
+      std::ofstream list(dir / "list.txt");
+      list << test::sharedData("srtm3_N57E011_4326.tif") << "\n" << dir / "missing.tif" << "\n";
+    }
+    result = test::runTerratiles({"build", "--input-list", dir / "list.txt", "-o", dir / "out"});
+    CHECK(result.exit_code == 3);
+    CHECK(result.err.find("list.txt line 2: " + dir / "missing.tif" + ": no such file or directory") !=
+          std::string::npos);
+
+    // A raster in another CRS among the pieces: the first offending file is named.
+    result = test::runTerratiles({"build", test::sharedData("srtm3_N57E011_4326.tif"),
+                                  test::sharedData("ch_dhm25_interlaken_25m_2056.tif"), "-o", dir / "out"});
+    CHECK(result.exit_code == 3);
+    CHECK(result.err.find("ch_dhm25_interlaken_25m_2056.tif: CRS is EPSG:2056 but") != std::string::npos);
+
+    result = test::runTerratiles({"build", "-o", dir / "out"});
+    CHECK(result.exit_code == 2);
+    CHECK(result.err.find("no input raster given") != std::string::npos);
+    CHECK(!fs::exists(dir.path() / "out"));
+  }
+}

@@ -1,0 +1,270 @@
+// Benchmark: how `terratiles build` scales with the input's size, on real-derived rasters of
+// 37 M and 149 M pixels (issue 16's targets: the larger at most 2 GiB peak RSS, at most 1.25x
+// the smaller's peak, seconds per M pixels within 1.25x).
+//
+//   terratiles_bench_scale [--source ETOPO5] [--dir DIR] [--sizes 8640x4320,17280x8640]
+//                          [--tin-max-error 10] [--threads N] [--no-check] [--terratiles PATH]
+//                          [-- BUILD_OPTION...]
+//
+// The rasters are ETOPO5 (../shared/data/etopo5_global_4326.tif) resampled in-process with
+// GDALWarp, as `gdalwarp -r cubic -te -180 -90 180 90 -ts W H` (the -te keeps the pixels
+// square: ETOPO5's own extent runs 2.5' past the poles), written once to DIR (default
+// bench_scale/ beside this program) and reused. Each is built once, as a child process:
+//   terratiles build RASTER -o DIR/out_WxH --tin-max-error E --progress json -f [--threads N]
+// timed from spawn to reap, its peak resident set from wait4's ru_maxrss and the stage where
+// it was reached from the `stage_done` lines. Then `terratiles check DIR/out_WxH` (unless
+// --no-check), timed and measured the same way. The table gives seconds, M pixels per second,
+// peak RSS and bytes per pixel, and the ratios of the largest raster to the smallest.
+#include <gdal_priv.h>
+#include <gdal_utils.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "src/base/error.h"
+#include "tools/bench/bench_support.h"
+
+using namespace terratiles;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kMegabyte = 1e6;
+constexpr double kTargetPeakBytes = 2.0 * 1024 * 1024 * 1024;  // 2 GiB
+constexpr double kTargetRatio = 1.25;
+
+struct Size {
+  int width = 0;
+  int height = 0;
+  double pixels() const { return static_cast<double>(width) * height; }
+  std::string text() const { return std::to_string(width) + "x" + std::to_string(height); }
+};
+
+struct BenchOptions {
+  std::string source;
+  fs::path dir;
+  std::vector<Size> sizes{{8640, 4320}, {17280, 8640}};
+  double tin_max_error_m = 10;
+  int threads = -1;  // -1: not passed
+  bool check = true;
+  std::string terratiles;
+  std::vector<std::string> build_options;
+};
+
+constexpr const char* kUsage =
+    "usage: terratiles_bench_scale [--source ETOPO5] [--dir DIR] [--sizes 8640x4320,17280x8640]\n"
+    "                              [--tin-max-error 10] [--threads N] [--no-check] [--terratiles PATH]\n"
+    "                              [-- BUILD_OPTION...]\n"
+    "  --source         the raster to resample (default ../shared/data/etopo5_global_4326.tif)\n"
+    "  --dir            where the resampled rasters and the outputs go (default bench_scale/ beside\n"
+    "                   this program); rasters already there are reused\n"
+    "  --sizes          WxH,... of the global rasters, smallest first (gdalwarp -r cubic -ts W H)\n"
+    "  --tin-max-error  metres (default 10)\n"
+    "  --threads        passed to terratiles build (default: not passed, all cores)\n"
+    "  --no-check       do not run terratiles check on the outputs\n"
+    "  --terratiles     the terratiles executable (default: next to this program)\n"
+    "  -- OPTION...     further options for terratiles build\n";
+
+Size parseSize(const std::string& text) {
+  const std::size_t x = text.find('x');
+  Size size;
+  if (x != std::string::npos) {
+    size.width = static_cast<int>(bench::parseNumber(text.substr(0, x), "--sizes"));
+    size.height = static_cast<int>(bench::parseNumber(text.substr(x + 1), "--sizes"));
+  }
+  if (size.width < 2 || size.height < 2) {
+    throw Error(ErrorCode::Usage, "--sizes expects WxH with W, H >= 2 (e.g. 8640x4320), found '" + text + "'");
+  }
+  return size;
+}
+
+BenchOptions parseOptions(int argc, char** argv) {
+  BenchOptions options;
+  const fs::path program_dir = fs::absolute(fs::path(argv[0])).parent_path();
+  options.terratiles = (program_dir / "terratiles").string();
+  options.dir = program_dir / "bench_scale";
+  options.source = (fs::path(__FILE__).parent_path() / "../../../shared/data/etopo5_global_4326.tif").lexically_normal().string();
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw Error(ErrorCode::Usage, arg + " expects a value (see --help)");
+      return argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (arg == "--") {
+      for (++i; i < argc; ++i) options.build_options.push_back(argv[i]);
+    } else if (arg == "--source") {
+      options.source = value();
+    } else if (arg == "--dir") {
+      options.dir = value();
+    } else if (arg == "--sizes") {
+      options.sizes.clear();
+      std::istringstream list(value());
+      for (std::string item; std::getline(list, item, ',');) options.sizes.push_back(parseSize(item));
+      if (options.sizes.empty()) throw Error(ErrorCode::Usage, "--sizes expects at least one WxH");
+    } else if (arg == "--tin-max-error") {
+      options.tin_max_error_m = bench::parseNumber(value(), arg);
+      if (!(options.tin_max_error_m > 0)) throw Error(ErrorCode::Usage, "--tin-max-error expects metres > 0");
+    } else if (arg == "--threads") {
+      options.threads = static_cast<int>(bench::parseNumber(value(), arg));
+    } else if (arg == "--no-check") {
+      options.check = false;
+    } else if (arg == "--terratiles") {
+      options.terratiles = value();
+    } else {
+      throw Error(ErrorCode::Usage, "unknown argument '" + arg + "' (see --help)");
+    }
+  }
+  if (!fs::exists(options.source)) {
+    throw Error(ErrorCode::Input, options.source + ": no such file; pass ETOPO5 with --source");
+  }
+  return options;
+}
+
+// gdalwarp -r cubic -te -180 -90 180 90 -ts W H, in-process; written to a temporary name and
+// renamed when complete.
+fs::path resampledRaster(const BenchOptions& options, const Size& size) {
+  const fs::path path = options.dir / ("etopo5_" + size.text() + ".tif");
+  if (fs::exists(path)) return path;
+  std::printf("making %s (gdalwarp -r cubic -te -180 -90 180 90 -ts %d %d) ...\n", path.c_str(), size.width,
+              size.height);
+  std::fflush(stdout);
+  GDALAllRegister();
+  GDALDatasetH source = GDALOpen(options.source.c_str(), GA_ReadOnly);
+  if (!source) throw Error(ErrorCode::Input, options.source + ": GDAL cannot open it");
+  const std::vector<std::string> words{"-of", "GTiff", "-r", "cubic", "-te", "-180", "-90", "180", "90", "-ts",
+                                       std::to_string(size.width), std::to_string(size.height),
+                                       "-co", "TILED=YES", "-co", "COMPRESS=DEFLATE", "-co", "BIGTIFF=IF_SAFER",
+                                       "-multi", "-wo", "NUM_THREADS=ALL_CPUS"};
+  std::vector<char*> argv;
+  for (const std::string& word : words) argv.push_back(const_cast<char*>(word.c_str()));
+  argv.push_back(nullptr);
+  GDALWarpAppOptions* warp = GDALWarpAppOptionsNew(argv.data(), nullptr);
+  const fs::path partial = path.string() + ".partial";
+  int failed = 0;
+  GDALDatasetH out = GDALWarp(partial.c_str(), nullptr, 1, &source, warp, &failed);
+  GDALWarpAppOptionsFree(warp);
+  GDALClose(source);
+  if (!out || failed) throw Error(ErrorCode::Output, partial.string() + ": gdalwarp failed");
+  GDALClose(out);
+  fs::rename(partial, path);
+  return path;
+}
+
+// One child run: seconds, peak and where the peak was set.
+struct Measured {
+  double seconds = 0;
+  std::uint64_t peak_rss_bytes = 0;
+  std::string peak_stage;
+  std::string summary;  // the build's tiles and triangles, or the check's verdict
+};
+
+Measured measure(const std::vector<std::string>& args) {
+  const bench::ChildRun child = bench::runChild(args, true, "");
+  if (!child.succeeded()) {
+    std::string last;
+    std::istringstream lines(child.output);
+    for (std::string line; std::getline(lines, line);) {
+      if (line.find("error") != std::string::npos) last = line;
+    }
+    throw Error(ErrorCode::Internal, args[0] + " " + args[1] + " " + child.describe() + ": " + last);
+  }
+  Measured measured;
+  measured.seconds = child.seconds;
+  measured.peak_rss_bytes = child.peak_rss_bytes;
+  std::uint64_t stage_peak = 0;
+  std::istringstream lines(child.output);
+  for (std::string line; std::getline(lines, line);) {
+    if (!line.starts_with("{")) {
+      if (line.find("check ") != std::string::npos || line.find("ok") == 0) measured.summary += line + " ";
+      continue;
+    }
+    const nlohmann::json event = nlohmann::json::parse(line, nullptr, false);
+    if (event.is_discarded() || !event.is_object()) continue;
+    const std::string kind = event.value("event", "");
+    if (kind == "stage_done") {
+      const std::uint64_t peak = event.value("peak_rss_bytes", std::uint64_t{0});
+      if (peak > stage_peak) {
+        stage_peak = peak;
+        measured.peak_stage = event.value("stage", "");
+      }
+    } else if (kind == "summary") {
+      measured.summary = std::to_string(event.value("tiles", std::size_t{0})) + " tiles, " +
+                         std::to_string(event.value("triangles", std::size_t{0})) + " triangles, check " +
+                         event.value("check", std::string("?"));
+    }
+  }
+  return measured;
+}
+
+int runBench(int argc, char** argv) {
+  const BenchOptions options = parseOptions(argc, argv);
+  fs::create_directories(options.dir);
+  std::vector<fs::path> rasters;
+  for (const Size& size : options.sizes) rasters.push_back(resampledRaster(options, size));
+
+  struct Row {
+    Size size;
+    Measured build, check;
+  };
+  std::vector<Row> rows;
+  for (std::size_t i = 0; i < rasters.size(); ++i) {
+    const fs::path out = options.dir / ("out_" + options.sizes[i].text());
+    char error_text[32];
+    std::snprintf(error_text, sizeof error_text, "%g", options.tin_max_error_m);
+    std::vector<std::string> args{options.terratiles, "build", rasters[i].string(), "-o", out.string(),
+                                  "--tin-max-error", error_text, "--progress", "json", "-f"};
+    if (options.threads >= 0) {
+      args.push_back("--threads");
+      args.push_back(std::to_string(options.threads));
+    }
+    args.insert(args.end(), options.build_options.begin(), options.build_options.end());
+    std::printf("building %s ...\n", rasters[i].filename().c_str());
+    std::fflush(stdout);
+    Row row{options.sizes[i], measure(args), {}};
+    if (options.check) {
+      std::printf("checking %s ...\n", out.filename().c_str());
+      std::fflush(stdout);
+      row.check = measure({options.terratiles, "check", out.string(), "--progress", "json"});
+    }
+    rows.push_back(row);
+  }
+
+  std::printf("\n%-12s %9s %9s %9s %10s %10s %7s  %-28s %9s %10s\n", "raster", "M px", "build s", "M px/s",
+              "s per M px", "peak MB", "B/px", "peak set in", "check s", "check MB");
+  for (const Row& row : rows) {
+    const double mpx = row.size.pixels() / 1e6;
+    std::printf("%-12s %9.1f %9.1f %9.3f %10.3f %10.0f %7.1f  %-28s %9.1f %10.0f\n", row.size.text().c_str(), mpx,
+                row.build.seconds, mpx / row.build.seconds, row.build.seconds / mpx,
+                static_cast<double>(row.build.peak_rss_bytes) / kMegabyte,
+                static_cast<double>(row.build.peak_rss_bytes) / row.size.pixels(), row.build.peak_stage.c_str(),
+                row.check.seconds, static_cast<double>(row.check.peak_rss_bytes) / kMegabyte);
+  }
+  for (const Row& row : rows) std::printf("  %s: %s\n", row.size.text().c_str(), row.build.summary.c_str());
+  if (rows.size() >= 2) {
+    const Row& small = rows.front();
+    const Row& large = rows.back();
+    const double time_ratio = (large.build.seconds / large.size.pixels()) / (small.build.seconds / small.size.pixels());
+    const double peak_ratio =
+        static_cast<double>(large.build.peak_rss_bytes) / static_cast<double>(small.build.peak_rss_bytes);
+    std::printf("\n%s against %s: seconds per M px %.2fx (target <= %.2fx), peak RSS %.2fx (target <= %.2fx), "
+                "peak %.0f MB (target <= %.0f MB)\n",
+                large.size.text().c_str(), small.size.text().c_str(), time_ratio, kTargetRatio, peak_ratio,
+                kTargetRatio, static_cast<double>(large.build.peak_rss_bytes) / kMegabyte, kTargetPeakBytes / kMegabyte);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return terratiles::bench::runProgram("terratiles_bench_scale", [&] { return runBench(argc, argv); });
+}
