@@ -107,6 +107,31 @@ void writeGeoTiff(const DemGrid& dem, const std::string& path, bool with_crs) {
   GDALClose(ds);
 }
 
+std::map<std::string, std::string> filesUnder(const std::filesystem::path& dir, const std::vector<std::string>& prefixes) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string relative = std::filesystem::relative(entry.path(), dir).generic_string();
+    bool wanted = prefixes.empty();
+    for (const std::string& prefix : prefixes) wanted = wanted || relative.rfind(prefix, 0) == 0;
+    if (!wanted) continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    files[relative] = std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  return files;
+}
+
+nlohmann::json withoutInnerRefine(nlohmann::json tileset) {
+  const std::function<void(nlohmann::json&, bool)> drop = [&](nlohmann::json& tile, bool root) {
+    if (!root) tile.erase("refine");
+    if (tile.contains("children")) {
+      for (nlohmann::json& child : tile["children"]) drop(child, false);
+    }
+  };
+  drop(tileset["root"], true);
+  return tileset;
+}
+
 CliResult runTerratiles(const std::vector<std::string>& args, const std::string& standard_input) {
   std::vector<std::string> argv{"terratiles"};
   argv.insert(argv.end(), args.begin(), args.end());

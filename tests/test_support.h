@@ -4,6 +4,8 @@
 
 #include <filesystem>
 #include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -52,6 +54,15 @@ TinErrorStatistics measureOnGlobe(const DemGrid& dem, const TinMesh& mesh, const
 // two zooms and 300 cuts, no hole, nothing left out, every shared vertex exactly one
 // position, no error above its geometricError, regions holding their content.
 void checkSeamless(const CheckReport& report);
+
+// Every regular file below `dir` whose path relative to it starts with one of `prefixes`
+// (all when empty), as relative path -> bytes.
+std::map<std::string, std::string> filesUnder(const std::filesystem::path& dir,
+                                              const std::vector<std::string>& prefixes = {});
+
+// A tileset read back by readTilesetTree, without the refine REPLACE every external tileset's
+// root says (its parent file's tiles inherit it anyway): comparable with a single file's tree.
+nlohmann::json withoutInnerRefine(nlohmann::json tileset);
 
 struct CliResult {
   int exit_code = -1;

@@ -37,30 +37,79 @@ void finalizeTree(TileNode& node) {
 
 namespace {
 
-nlohmann::json tileJson(const TileNode& node, bool is_root) {
+// How tiles are written into the files of a split tileset (levels_per_file 0: one file).
+struct FileSplit {
+  int levels_per_file = 0;
+  std::vector<TilesetFile>* files = nullptr;
+  std::string generator;
+};
+
+std::string externalTilesetPath(const TileKey& key) {
+  return "tilesets/" + std::to_string(key.zoom) + "/" + std::to_string(key.x) + "/" + std::to_string(key.y) + ".json";
+}
+
+nlohmann::json fileJson(const TileNode& root, double geometric_error_m, const FileSplit& split,
+                        const std::string& to_output_root);
+
+// `depth`: levels below the root of the file the tile is written into; `to_output_root`: the
+// path from that file's directory to the output directory ("" or "../../../").
+nlohmann::json tileJson(const TileNode& node, bool is_root, int depth, const FileSplit& split,
+                        const std::string& to_output_root) {
   nlohmann::json tile;
   tile["boundingVolume"]["region"] = {node.region.west_rad,     node.region.south_rad,
                                       node.region.east_rad,     node.region.north_rad,
                                       node.region.min_height_m, node.region.max_height_m};
   tile["geometricError"] = node.geometric_error_m;
   if (is_root) tile["refine"] = "REPLACE";
-  if (!node.content_uri.empty()) tile["content"]["uri"] = node.content_uri;
+  if (split.levels_per_file > 0 && depth == split.levels_per_file) {
+    const std::string path = externalTilesetPath(node.key);
+    tile["content"]["uri"] = to_output_root + path;
+    split.files->push_back({path, ""});
+    const std::size_t at = split.files->size() - 1;
+    (*split.files)[at].text = fileJson(node, node.geometric_error_m, split, "../../../").dump(1, '\t') + "\n";
+    return tile;
+  }
+  if (!node.content_uri.empty()) tile["content"]["uri"] = to_output_root + node.content_uri;
   if (!node.children.empty()) {
     nlohmann::json children = nlohmann::json::array();
-    for (const TileNode& child : node.children) children.push_back(tileJson(child, false));
+    for (const TileNode& child : node.children) {
+      children.push_back(tileJson(child, false, depth + 1, split, to_output_root));
+    }
     tile["children"] = std::move(children);
   }
   return tile;
 }
 
+nlohmann::json fileJson(const TileNode& root, double geometric_error_m, const FileSplit& split,
+                        const std::string& to_output_root) {
+  nlohmann::json json;
+  json["asset"] = {{"version", "1.1"}, {"generator", split.generator}};
+  json["geometricError"] = geometric_error_m;
+  json["root"] = tileJson(root, true, 0, split, to_output_root);
+  return json;
+}
+
 }  // namespace
 
+std::size_t tileCount(const TileNode& node) {
+  std::size_t count = 1;
+  for (const TileNode& child : node.children) count += tileCount(child);
+  return count;
+}
+
 std::string tilesetToJson(const Tileset& tileset) {
-  nlohmann::json json;
-  json["asset"] = {{"version", "1.1"}, {"generator", tileset.generator}};
-  json["geometricError"] = tileset.geometric_error_m;
-  json["root"] = tileJson(tileset.root, true);
-  return json.dump(1, '\t') + "\n";
+  const FileSplit one_file{0, nullptr, tileset.generator};
+  return fileJson(tileset.root, tileset.geometric_error_m, one_file, "").dump(1, '\t') + "\n";
+}
+
+std::vector<TilesetFile> tilesetFiles(const Tileset& tileset, int levels_per_file) {
+  if (levels_per_file <= 0) {
+    levels_per_file = tileCount(tileset.root) <= kSingleFileTiles ? 0 : kDefaultLevelsPerFile;
+  }
+  std::vector<TilesetFile> files(1);
+  const FileSplit split{levels_per_file, &files, tileset.generator};
+  files[0] = {"tileset.json", fileJson(tileset.root, tileset.geometric_error_m, split, "").dump(1, '\t') + "\n"};
+  return files;
 }
 
 }  // namespace terratiles

@@ -11,6 +11,7 @@
 #include "src/base/error.h"
 #include "src/pipeline/report_html.h"
 #include "tileset/implicit_tileset.h"
+#include "tileset/read_tileset.h"
 
 namespace terratiles {
 namespace {
@@ -132,7 +133,7 @@ json reportFromDisk(const fs::path& dir, Progress& progress) {
                                       "so its source DEM is unknown; rebuild it with `terratiles build` to get a report");
   }
   const json build = readJsonFile(dir / "build.json");
-  const json tileset = readJsonFile(dir / "tileset.json");
+  const json tileset = readTilesetTree(dir / "tileset.json");
   json report;
   report["schema"] = kReportSchema;
   report["generator"] = build.value("generator", std::string("terratiles (unknown version)"));

@@ -32,6 +32,7 @@
 #include "src/tiling/tile_key.h"
 #include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"
+#include "tileset/read_tileset.h"
 
 namespace terratiles {
 namespace {
@@ -64,6 +65,7 @@ struct CheckTile {
   std::vector<std::uint32_t> pixels;
   DrawnTileMeasure measure;           // the decoded content against the DEM and the finer zoom
   bool region_holds_content = true;
+  std::string region_excess;  // when not: the bound the content passes most, and by how much
   // The content's outline: its vertices on boundary edges (an edge of one triangle), numbered
   // 0, 1, ... in the order of their index in the decoded mesh, in the grid frame (outline
   // vertices back on their pixel centres) and as decoded (ECEF), and those edges (into the
@@ -294,6 +296,21 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
   tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&
                                                 content.east_rad <= r[2] && content.north_rad <= r[3] &&
                                                 content.min_height_m >= r[4] && content.max_height_m <= r[5]);
+  if (!tile.region_holds_content) {
+    // Metres on the ground for the angles (the mean radius), to name the worst bound.
+    constexpr double kMetresPerRad = 6371000.0;
+    const std::array<std::pair<const char*, double>, 6> excess{{{"west", (r[0] - content.west_rad) * kMetresPerRad},
+                                                                {"south", (r[1] - content.south_rad) * kMetresPerRad},
+                                                                {"east", (content.east_rad - r[2]) * kMetresPerRad},
+                                                                {"north", (content.north_rad - r[3]) * kMetresPerRad},
+                                                                {"lowest height", r[4] - content.min_height_m},
+                                                                {"highest height", content.max_height_m - r[5]}}};
+    const auto worst = std::max_element(excess.begin(), excess.end(),
+                                        [](const auto& a, const auto& b) { return a.second < b.second; });
+    char text[160];
+    std::snprintf(text, sizeof text, " (%.6g m past its %s bound)", worst->second, worst->first);
+    tile.region_excess = text;
+  }
 
   const std::size_t m = outline_vertices.size();
   tile.vertex_grid.resize(m);
@@ -484,7 +501,8 @@ std::string keyText(const TileKey& key) { return key.path(); }
 
 CheckReport checkOutput(const std::string& output_dir, const CheckOptions& options, Progress& progress) {
   const fs::path dir(output_dir);
-  const json tileset = readJson(dir / "tileset.json");
+  readJson(dir / "tileset.json");  // names a missing or broken file as the check always did
+  const json tileset = readTilesetTree(dir / "tileset.json");  // external tilesets put in place
   const json build = readJson(dir / "build.json");
   CheckReport report;
   std::vector<CheckTile> tiles;
@@ -591,7 +609,7 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     }
     if (!tile.region_holds_content) {
       ++report.content_region_violations;
-      problem("tile " + keyText(tile.key) + ": its content reaches outside its region");
+      problem("tile " + keyText(tile.key) + ": its content reaches outside its region" + tile.region_excess);
     }
   }
   for (const CheckTile& tile : tiles) {

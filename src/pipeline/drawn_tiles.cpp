@@ -607,6 +607,15 @@ Region drawnRegion(std::span<const EcefPoint> vertices, std::span<const std::uin
     // Only pole vertices: a degenerate content; take the whole circle.
     all_longitudes = true;
   }
+  // A content at the antimeridian (a global DEM's last column, or a triangle across it): a
+  // vertex within a position step of it may decode on its other side (lon 180 as -179.99999),
+  // where no region from west to east holds it, so it takes every longitude.
+  constexpr double kSeamDeg = 1e-3;  // 110 m, more than any position step moves a vertex
+  for (std::size_t v = 0; v < vertices.size() && !all_longitudes; ++v) {
+    if (used[v] && std::fabs(geodetic[v].lat_deg) < kPoleDeg && std::fabs(geodetic[v].lon_deg) > 180 - kSeamDeg) {
+      all_longitudes = true;
+    }
+  }
   if (all_longitudes) {
     region.west_rad = -std::numbers::pi;
     region.east_rad = std::numbers::pi;

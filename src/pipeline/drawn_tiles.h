@@ -163,7 +163,8 @@ double lowestHeightBound(const DrawnTriangle& triangle);
 
 // The region holding every drawn point of the triangles (see the header comment), grown by a
 // millimetre and 1e-10 rad against rounding. A vertex at a pole (|lat| within 1e-9 deg of 90)
-// adds no longitude. `geodetic` (when not empty): every vertex's WGS84 latitude, longitude
+// adds no longitude; one within 0.001 deg of the antimeridian makes it every longitude (it may
+// decode on either side). `geodetic` (when not empty): every vertex's WGS84 latitude, longitude
 // (degrees) and height as GeographicLib::Geocentric::WGS84().Reverse gives them, which the
 // region would otherwise compute.
 struct GeodeticOfVertex {

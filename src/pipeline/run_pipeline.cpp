@@ -883,7 +883,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       summary.bytes += output.writeFile(file.path, file.bytes);
     }
   } else {
-    summary.bytes += output.writeFile("tileset.json", tilesetToJson(tileset));
+    // Deep trees: external tilesets, then tileset.json (the last file written).
+    std::vector<TilesetFile> files = tilesetFiles(tileset, options.tileset_levels);
+    for (std::size_t f = files.size(); f-- > 0;) summary.bytes += output.writeFile(files[f].path, files[f].text);
+    if (files.size() > 1) progress.note("tileset: " + std::to_string(files.size() - 1) + " external tilesets below tileset.json");
   }
   progress.endStage();
   progress.throwIfCancelled();

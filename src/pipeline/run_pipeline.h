@@ -58,6 +58,9 @@ struct BuildOptions {
   // measured error and region as tile metadata) instead of an explicit tree.
   bool implicit_tiling = false;
   std::int32_t subtree_levels = 6;
+  // Explicit tilesets: tree levels per JSON file, deeper tiles in external tilesets (tilesetFiles);
+  // 0: one file up to kSingleFileTiles tiles, else 6 levels per file.
+  std::int32_t tileset_levels = 0;
   // The build report (report.json, report.html): `terratiles check` with this many random
   // cuts runs on the output before it is moved into place (0: no check in the report).
   bool report = true;

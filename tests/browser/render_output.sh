@@ -14,6 +14,10 @@
 #   report         the Interlaken build's report.html (tools/render_check/report_check.mjs):
 #                  no request leaves the page, no console error, the plots and both maps per
 #                  zoom are there and decode; a full-page screenshot.
+#   interlaken_external
+#                  the same tile written with --tileset-levels 2: tileset.json holds two
+#                  levels, the rest are external tilesets (tilesets/z/x/y.json) CesiumJS must
+#                  descend into; the same expectations.
 #   srtm_implicit  SRTM N57E011, geographic, --implicit: CesiumJS must expand the subtrees
 #                  and take every tile's measured error from the tile metadata (without it,
 #                  it halves the root's error per level); the explicit root frames the data,
@@ -40,13 +44,19 @@ case "$case_name" in
       --screenshot "$artifacts/interlaken_report.png"
     exit 0
     ;;
+  interlaken_external)
+    "$terratiles" build "$data_dir/ch_dhm25_interlaken_25m_2056.tif" -o "$work/out" -q \
+      --geoid "$data_dir/geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif" --tileset-levels 2
+    ls "$work/out/tilesets"/*/*/*.json >/dev/null  # the tree was split
+    expectations=(--expect-lon 7.872 --expect-lat 46.707 --expect-height 1409.6 --height-tolerance 5)
+    ;;
   srtm_implicit)
     "$terratiles" build "$data_dir/srtm3_N57E011_4326.tif" -o "$work/out" -q \
       --scheme geographic --implicit --tin-max-error 2
     expectations=(--expect-lon 11.5 --expect-lat 57.5)
     ;;
   *)
-    echo "render_output.sh: unknown case '$case_name'; expected interlaken, report or srtm_implicit" >&2
+    echo "render_output.sh: unknown case '$case_name'; expected interlaken, interlaken_external, report or srtm_implicit" >&2
     exit 2
     ;;
 esac

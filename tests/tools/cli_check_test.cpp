@@ -28,6 +28,7 @@
 #include "src/tin/measure_tin.h"
 #include "tests/test_support.h"
 #include "tileset/implicit_tileset.h"
+#include "tileset/read_tileset.h"
 
 using namespace terratiles;
 
@@ -481,4 +482,43 @@ TEST_SUITE("check") {
     CHECK(refused.err.find("--scheme geographic") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir / "refused"));
   }
+
+  TEST_CASE("a tileset split into external tilesets has the same tiles and tree, and passes the check") {
+    test::TempDir dir;
+    const std::string interlaken = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+    for (const char* name : {"one", "split"}) {
+      std::vector<std::string> args{"build", interlaken, "-o", dir / name, "-q", "--no-report"};
+      if (std::string(name) == "split") args.insert(args.end(), {"--tileset-levels", "2"});
+      const auto built = test::runTerratiles(args);
+      CAPTURE(built.err);
+      REQUIRE(built.exit_code == 0);
+    }
+    const auto one = test::filesUnder(dir.path() / "one", {"tiles/"});
+    CHECK(one == test::filesUnder(dir.path() / "split", {"tiles/"}));
+    const auto externals = test::filesUnder(dir.path() / "split", {"tilesets/"});
+    REQUIRE(externals.size() >= 2);
+    // tileset.json holds two levels, the root and its children; their children's contents are
+    // the external tilesets.
+    const nlohmann::json top = readJsonFile(dir / "split/tileset.json");
+    REQUIRE(top["root"].contains("children"));
+    std::size_t stubs = 0;
+    for (const nlohmann::json& child : top["root"]["children"]) {
+      for (const nlohmann::json& grandchild : child.value("children", nlohmann::json::array())) {
+        CHECK(!grandchild.contains("children"));
+        CHECK(grandchild["content"]["uri"].get<std::string>().rfind("tilesets/", 0) == 0);
+        ++stubs;
+      }
+    }
+    CHECK(stubs == externals.size() - (externals.size() - stubs));  // every stub names a file
+    for (const auto& [path, text] : externals) CHECK(nlohmann::json::parse(text)["root"]["refine"] == "REPLACE");
+    // Read back with the external tilesets in place: the single file's tree, tile for tile
+    // (each external root says refine REPLACE, which it inherits anyway).
+    const nlohmann::json read = test::withoutInnerRefine(readTilesetTree(dir.path() / "split/tileset.json"));
+    CHECK(read == readJsonFile(dir / "one/tileset.json"));
+    Progress quiet(ProgressMode::Quiet);
+    CheckOptions check;
+    check.cuts = 300;
+    test::checkSeamless(checkOutput(dir / "split", check, quiet));
+  }
 }
+

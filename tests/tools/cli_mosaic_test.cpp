@@ -67,16 +67,7 @@ void buildVrt(const std::string& path, const std::vector<std::string>& sources) 
 }
 
 // The tiles and tileset.json of an output (build.json and the report name the inputs).
-std::map<std::string, std::string> tileBytes(const fs::path& out) {
-  std::map<std::string, std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(out)) {
-    const std::string relative = fs::relative(entry.path(), out).string();
-    if (!entry.is_regular_file() || (relative != "tileset.json" && relative.rfind("tiles/", 0) != 0)) continue;
-    std::ifstream in(entry.path(), std::ios::binary);
-    files[relative] = std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  }
-  return files;
-}
+std::map<std::string, std::string> tileBytes(const fs::path& out) { return test::filesUnder(out, {"tileset.json", "tiles/"}); }
 
 void checkSameBytes(const std::map<std::string, std::string>& expected, const std::map<std::string, std::string>& found) {
   REQUIRE(expected.size() == found.size());

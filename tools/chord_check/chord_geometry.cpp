@@ -31,6 +31,7 @@
 #include "src/geo/place_on_globe.h"
 #include "src/tin/tin_mesh.h"
 #include "tileset/implicit_tileset.h"
+#include "tileset/read_tileset.h"
 
 namespace terratiles {
 namespace {
@@ -882,7 +883,8 @@ ChordReport measureChordGeometry(const std::string& output_dir, const ChordOptio
     throw Error(ErrorCode::Input, output_dir + ": not a directory; expected a terratiles output directory "
                                                "(tileset.json and build.json from terratiles build)");
   }
-  const json tileset = readJsonFile(dir / "tileset.json", output_dir);
+  readJsonFile(dir / "tileset.json", output_dir);  // names a missing or broken file
+  const json tileset = readTilesetTree(dir / "tileset.json");  // external tilesets put in place
   const json build = readJsonFile(dir / "build.json", output_dir);
   ChordReport report;
   report.output_dir = output_dir;

@@ -211,8 +211,9 @@ function analyseTileset(tilesetFile) {
       walk(root, treeDepth, baseDir, onCentrePath);
       return;
     }
-    // Tiles without content draw nothing: they get no level of their own.
-    const d = contentUris(tile).length
+    // Tiles without content draw nothing: they get no level of their own; nor does a tile whose
+    // content is an external tileset (its root, walked below, is the tile that draws).
+    const d = contentUris(tile).some((u) => !/\.json$/i.test(u))
       ? (depths[depth] ||= { tiles: 0, contentTiles: 0, geometricErrorMin: Infinity, geometricErrorMax: -Infinity })
       : { tiles: 0, contentTiles: 0, geometricErrorMin: Infinity, geometricErrorMax: -Infinity };
     d.tiles++;

@@ -562,6 +562,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                           "content availability, each tile's measured error and region as tile metadata)");
   build_command->add_option("--subtree-levels", build.subtree_levels, "--implicit: tree levels per subtree file")
       ->capture_default_str();
+  build_command
+      ->add_option("--tileset-levels", build.tileset_levels,
+                   "Explicit tilesets: tree levels per JSON file, deeper tiles in external tilesets "
+                   "(tilesets/z/x/y.json), so no file grows with the data (0: one file up to 10,000 tiles, else 6)")
+      ->check(CLI::Range(0, 20))
+      ->capture_default_str();
   build_command->add_flag("--no-report", [&build](std::int64_t) { build.report = false; },
                           "Write no report.json / report.html");
   build_command
