@@ -44,7 +44,8 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr std::size_t kMaxProblems = 12;
 // A decoded outline vertex is put back on its pixel centre when it decodes as near it as
 // quantisation can move a DEM point (the widest step's half diagonal, plus 1 cm for the
-// round trip through PROJ), and never from farther than this many pixels. A vertex a level
+// round trip through PROJ), and never from farther than this many pixels (of the pixel's
+// north-south size, in both directions). A vertex a level
 // moved (a simplifier's placement) may lie a hundredth of a pixel from a pixel centre, tens
 // of metres on a coarse DEM: put back, it would seem to sit on a straight line of lattice
 // points it is not on.
@@ -254,7 +255,13 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
     if (at_pole[v]) continue;
     const double col = std::round(grid[v].col), row = std::round(grid[v].row);
     const auto spacing_row = static_cast<std::int32_t>(std::clamp(row, 0.0, dem.height - 1.0));
-    const double column_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.columnSpacing(spacing_row));
+    // The cap is a tenth of the pixel's north-south size in both directions: near a pole a
+    // geographic DEM's columns are metres apart (6.8 m at 89.96 deg for 5'), closer than the
+    // grid of a coarse zoom's outline snaps a vertex (half a step's diagonal), so a cap of a
+    // tenth of a column would leave the data's own border vertices off their pixel centres.
+    const double north_south_m = globe.rowSpacing(std::min(spacing_row, dem.height - 2));  // the last row has none below
+    const double column_tolerance_px =
+        std::min(kLatticeTolerance_px * north_south_m, tolerance_m) / globe.columnSpacing(spacing_row);
     const double row_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.rowSpacing(spacing_row));
     if (std::fabs(grid[v].col - col) > column_tolerance_px || std::fabs(grid[v].row - row) > row_tolerance_px) {
       ++tile.off_lattice;
