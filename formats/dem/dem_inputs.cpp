@@ -13,11 +13,8 @@ namespace {
 namespace fs = std::filesystem;
 
 bool hasRasterExtension(const fs::path& path) {
-  std::string extension = path.extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   for (const char* known : kRasterExtensions) {
-    if (extension == known) return true;
+    if (hasExtension(path.string(), known)) return true;
   }
   return false;
 }
@@ -58,6 +55,13 @@ void addInput(const std::string& input, const std::string& where, std::vector<st
 }
 
 }  // namespace
+
+bool hasExtension(const std::string& path, const char* extension) {
+  std::string found = fs::path(path).extension().string();
+  std::transform(found.begin(), found.end(), found.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return found == extension;
+}
 
 std::vector<std::string> expandDemInputs(const std::vector<std::string>& arguments,
                                          const std::string& input_list_path) {

@@ -23,6 +23,9 @@ namespace terratiles {
 inline constexpr const char* kRasterExtensions[] = {".tif", ".tiff", ".vrt", ".hgt", ".asc", ".img",
                                                    ".bil", ".flt", ".dem", ".nc",  ".jp2"};
 
+// Whether `path`'s extension is `extension` (lower case, with the dot), in any case.
+bool hasExtension(const std::string& path, const char* extension);
+
 std::vector<std::string> expandDemInputs(const std::vector<std::string>& arguments,
                                          const std::string& input_list_path = {});
 

@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cctype>
 #include <cstring>
 #include <deque>
 #include <optional>
@@ -17,6 +16,7 @@
 #include <memory>
 #include <sstream>
 
+#include "formats/dem/dem_inputs.h"
 #include "formats/gdal_support.h"
 #include "src/base/error.h"
 
@@ -45,13 +45,6 @@ std::string describeCrs(const OGRSpatialReference& srs) {
   if (authority && code) return std::string(authority) + ":" + code;
   const char* name = srs.GetName();
   return name ? name : "unnamed CRS";
-}
-
-bool hasExtension(const std::string& path, const char* extension) {
-  std::string found = std::filesystem::path(path).extension().string();
-  std::transform(found.begin(), found.end(), found.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return found == extension;
 }
 
 RasterInfo openRaster(const std::string& path) {
