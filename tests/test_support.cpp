@@ -5,12 +5,15 @@
 #include <ogr_spatialref.h>
 #include <stdlib.h>
 
+#include <algorithm>
 #include <array>
+#include <map>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
 
 #include "formats/geoid/read_geoid.h"
+#include "formats/tin/tin_file.h"
 #include "src/geo/dem_on_globe.h"
 #include "tools/terratiles/run_cli.h"
 
@@ -163,6 +166,42 @@ GltfValidation validateGltfTree(const std::string& dir) {
   if (status != 0 && result.errors == 0) result.ran = false;
   return result;
 }
+
+std::set<std::array<double, 6>> checkStitchedTin(const std::string& path, const DemGrid& dem, double bound_m,
+                                              std::size_t uncovered_expected) {
+  const CrsTin tin = readTinFile(path);
+  std::vector<std::array<double, 3>> positions = tin.positions;
+  std::sort(positions.begin(), positions.end());
+  CHECK(std::adjacent_find(positions.begin(), positions.end()) == positions.end());
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> uses;
+  std::set<std::array<double, 6>> triangles;
+  const auto& idx = tin.triangle_indices;
+  for (std::size_t t = 0; t < idx.size(); t += 3) {
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = idx[t + k], b = idx[t + (k + 1) % 3];
+      ++uses[{std::min(a, b), std::max(a, b)}];
+    }
+    std::array<std::array<double, 2>, 3> corners;
+    for (int k = 0; k < 3; ++k) corners[k] = {tin.positions[idx[t + k]][0], tin.positions[idx[t + k]][1]};
+    const auto first = std::min_element(corners.begin(), corners.end()) - corners.begin();
+    std::array<double, 6> key;
+    for (int k = 0; k < 3; ++k) {
+      key[2 * k] = corners[(first + k) % 3][0];
+      key[2 * k + 1] = corners[(first + k) % 3][1];
+    }
+    triangles.insert(key);
+  }
+  std::size_t overused = 0;
+  for (const auto& [edge, count] : uses) overused += count > 2;
+  CHECK(overused == 0);
+  const TinMesh mesh = toGridTin(tin, dem.origin_x, dem.origin_y, dem.pixel_size_x);
+  const TinErrorStatistics errors = test::measureOnGlobe(dem, mesh);
+  CHECK(errors.max_error_m <= bound_m + 1e-6);
+  CHECK(errors.uncovered_valid_pixels == uncovered_expected);
+  CHECK(errors.covered_nodata_pixels == 0);
+  return triangles;
+}
+
 
 void checkSeamless(const CheckReport& report) {
   CHECK(report.zooms >= 2);

@@ -2,9 +2,11 @@
 // Shared helpers for the tests: real data paths, temporary directories, small DEMs built in
 // code, GeoTIFF writing, running the CLI in-process, and the Khronos glTF validator.
 
+#include <array>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <set>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -49,6 +51,13 @@ void writeGeoTiff(const DemGrid& dem, const std::string& path, bool with_crs = t
 // measureTin of `mesh` as the build measures it: on the globe of `dem` (DemOnGlobe), heights
 // orthometric above EGM96 unless `geoid_path` names another geoid grid.
 TinErrorStatistics measureOnGlobe(const DemGrid& dem, const TinMesh& mesh, const std::string& geoid_path = "");
+
+// The checks of a TIN built in blocks, read back from its file: one stitched mesh (no vertex
+// twice, no edge in more than two triangles, so no crack or overlap along a block border) that
+// holds every valid pixel within the bound. Returns its triangles as corner positions, each
+// starting at its smallest corner (orientation kept), for comparisons.
+std::set<std::array<double, 6>> checkStitchedTin(const std::string& path, const DemGrid& dem, double bound_m,
+                                                 std::size_t uncovered_expected);
 
 // The doctest checks of a seamless, honest output (`terratiles check`, no tolerance): at least
 // two zooms and 300 cuts, no hole, nothing left out, every shared vertex exactly one

@@ -342,6 +342,10 @@ DemGrid emptyWindow(const DemMosaic& mosaic, const PixelWindow& window) {
   dem.origin_y = mosaic.origin_y - static_cast<double>(window.row0) * mosaic.pixel_size;
   dem.pixel_size_x = mosaic.pixel_size;
   dem.pixel_size_y = mosaic.pixel_size;
+  dem.col_offset = window.col0;
+  dem.row_offset = window.row0;
+  dem.lattice_origin_x = mosaic.origin_x;
+  dem.lattice_origin_y = mosaic.origin_y;
   dem.crs_name = mosaic.crs_name;
   dem.crs_wkt = mosaic.crs_wkt;
   dem.heights_m.assign(dem.pixelCount(), DemGrid::kNoData);
@@ -483,7 +487,10 @@ DemGrid readDem(const std::vector<std::string>& paths, const ReadDemOptions& opt
 }
 
 DemGrid readDem(const std::vector<std::string>& paths, const std::string& stage, Progress& progress) {
-  const DemMosaic mosaic = scanDemMosaic(paths, &progress);
+  return readDem(scanDemMosaic(paths, &progress), stage, progress);
+}
+
+DemGrid readDem(const DemMosaic& mosaic, const std::string& stage, Progress& progress) {
   const bool several = mosaic.rasters.size() > 1;
   progress.beginStage(stage, several ? mosaic.rasters.size() : 0);
   ReadDemOptions options;

@@ -54,7 +54,9 @@ struct DemMosaic {
 // input, a stage counts the files.
 DemMosaic scanDemMosaic(const std::vector<std::string>& paths, Progress* progress = nullptr);
 
-// The heights of `window`, as a DemGrid whose origin is the window's corner.
+// The heights of `window`, as a DemGrid whose origin is the window's corner and whose pixels
+// are placed from the mosaic's corner (DemGrid::col_offset): a pixel two windows share has
+// the same coordinates in both.
 DemGrid readDemWindow(const DemMosaic& mosaic, const PixelWindow& window);
 
 struct ReadDemOptions {
@@ -71,5 +73,7 @@ DemGrid readDem(const std::vector<std::string>& paths, const ReadDemOptions& opt
 // `stage` counting the files read, which the caller ends (it may read more inside it, such as
 // the geoid).
 DemGrid readDem(const std::vector<std::string>& paths, const std::string& stage, Progress& progress);
+// The same for a mosaic already scanned.
+DemGrid readDem(const DemMosaic& mosaic, const std::string& stage, Progress& progress);
 
 }  // namespace terratiles

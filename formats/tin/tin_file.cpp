@@ -902,72 +902,72 @@ struct TinView {
   const std::vector<std::uint32_t>& triangle_indices;
 };
 
-// The text formats share their body: vertex lines "<prefix>x y z", then face lines
-// "<face_tag> a b c" with indices counted from index_base.
-void appendTextMesh(const TinView& tin, AtomicFile& file, const char* vertex_prefix,
-                    char face_tag, std::uint64_t index_base) {
-  std::string& out = file.buffer();
-  for (std::size_t v = 0; v < tin.vertex_count; ++v) {
-    const std::array<double, 3> p = tin.position(v);
-    out += vertex_prefix;
-    appendNumber(out, p[0]);
-    out += ' ';
-    appendNumber(out, p[1]);
-    out += ' ';
-    appendNumber(out, p[2]);
-    out += '\n';
-    file.maybeFlush();
+// One vertex and one triangle as each format stores them (OBJ indices count from 1).
+void appendVertexRecord(TinFileFormat format, std::string& out, const std::array<double, 3>& p) {
+  if (format == TinFileFormat::Ply) {
+    for (const double value : p) appendLittleEndian(out, value);
+    return;
   }
-  for (std::size_t i = 0; i < tin.triangle_indices.size(); i += 3) {
-    out += face_tag;
-    for (std::size_t k = 0; k < 3; ++k) {
-      out += ' ';
-      appendNumber(out, std::uint64_t{tin.triangle_indices[i + k]} + index_base);
-    }
-    out += '\n';
-    file.maybeFlush();
-  }
-}
-
-void writeOff(const TinView& tin, AtomicFile& file) {
-  std::string& out = file.buffer();
-  out += "OFF\n";
-  appendNumber(out, std::uint64_t{tin.vertex_count});
+  if (format == TinFileFormat::Obj) out += "v ";
+  appendNumber(out, p[0]);
   out += ' ';
-  appendNumber(out, std::uint64_t{tin.triangle_indices.size() / 3});
-  out += " 0\n";
-  appendTextMesh(tin, file, "", '3', 0);
-}
-
-void writeObj(const TinView& tin, AtomicFile& file) {
-  std::string& out = file.buffer();
-  out += "# ";
-  out += kFrameComment;
+  appendNumber(out, p[1]);
+  out += ' ';
+  appendNumber(out, p[2]);
   out += '\n';
-  appendTextMesh(tin, file, "v ", 'f', 1);  // OBJ indices are 1-based
 }
 
-void writePly(const TinView& tin, AtomicFile& file) {
+void appendTriangleRecord(TinFileFormat format, std::string& out, std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+  if (format == TinFileFormat::Ply) {
+    appendLittleEndian(out, std::uint8_t{3});
+    for (const std::uint32_t index : {a, b, c}) appendLittleEndian(out, index);
+    return;
+  }
+  const std::uint64_t base = format == TinFileFormat::Obj ? 1 : 0;
+  out += format == TinFileFormat::Obj ? 'f' : '3';
+  for (const std::uint32_t index : {a, b, c}) {
+    out += ' ';
+    appendNumber(out, std::uint64_t{index} + base);
+  }
+  out += '\n';
+}
+
+// What comes before the vertices: OFF's and PLY's counts, OBJ's comment.
+void appendHeader(TinFileFormat format, std::string& out, std::uint64_t vertex_count, std::uint64_t triangle_count) {
+  switch (format) {
+    case TinFileFormat::Off:
+      out += "OFF\n";
+      appendNumber(out, vertex_count);
+      out += ' ';
+      appendNumber(out, triangle_count);
+      out += " 0\n";
+      break;
+    case TinFileFormat::Obj:
+      out += "# ";
+      out += kFrameComment;
+      out += '\n';
+      break;
+    case TinFileFormat::Ply:
+      out += "ply\nformat binary_little_endian 1.0\ncomment ";
+      out += kFrameComment;
+      out += "\nelement vertex ";
+      appendNumber(out, vertex_count);
+      out += "\nproperty double x\nproperty double y\nproperty double z\nelement face ";
+      appendNumber(out, triangle_count);
+      out += "\nproperty list uchar uint vertex_indices\nend_header\n";
+      break;
+  }
+}
+
+void writeTinBody(TinFileFormat format, const TinView& tin, AtomicFile& file) {
   std::string& out = file.buffer();
-  out += "ply\nformat binary_little_endian 1.0\ncomment ";
-  out += kFrameComment;
-  out += "\nelement vertex ";
-  appendNumber(out, std::uint64_t{tin.vertex_count});
-  out += "\nproperty double x\nproperty double y\nproperty double z\nelement face ";
-  appendNumber(out, std::uint64_t{tin.triangle_indices.size() / 3});
-  out += "\nproperty list uchar uint vertex_indices\nend_header\n";
+  appendHeader(format, out, tin.vertex_count, tin.triangle_indices.size() / 3);
   for (std::size_t v = 0; v < tin.vertex_count; ++v) {
-    const std::array<double, 3> p = tin.position(v);
-    appendLittleEndian(out, p[0]);
-    appendLittleEndian(out, p[1]);
-    appendLittleEndian(out, p[2]);
+    appendVertexRecord(format, out, tin.position(v));
     file.maybeFlush();
   }
   for (std::size_t i = 0; i < tin.triangle_indices.size(); i += 3) {
-    appendLittleEndian(out, std::uint8_t{3});
-    appendLittleEndian(out, tin.triangle_indices[i]);
-    appendLittleEndian(out, tin.triangle_indices[i + 1]);
-    appendLittleEndian(out, tin.triangle_indices[i + 2]);
+    appendTriangleRecord(format, out, tin.triangle_indices[i], tin.triangle_indices[i + 1], tin.triangle_indices[i + 2]);
     file.maybeFlush();
   }
 }
@@ -988,15 +988,89 @@ void writeTinView(const TinView& tin, const std::string& path) {
   }
   const TinFileFormat format = tinFileFormatFor(path);
   AtomicFile file(path);
-  switch (format) {
-    case TinFileFormat::Off: writeOff(tin, file); break;
-    case TinFileFormat::Obj: writeObj(tin, file); break;
-    case TinFileFormat::Ply: writePly(tin, file); break;
-  }
+  writeTinBody(format, tin, file);
   file.commit();
 }
 
 }  // namespace
+
+// A body file of TinFileStream: written through a buffer, removed with the stream.
+struct TinFileStream::Part {
+  std::string path;
+  std::FILE* file = nullptr;
+  std::string buffer;
+
+  explicit Part(std::string part_path) : path(std::move(part_path)) {
+    file = std::fopen(path.c_str(), "wb+");
+    if (!file) {
+      outputError(path, std::string("cannot create (") + std::strerror(errno) + ")",
+                  "check that the directory exists and is writable");
+    }
+  }
+  ~Part() {
+    if (file) std::fclose(file);
+    std::error_code ignored;
+    fs::remove(path, ignored);
+  }
+  void flush() {
+    if (!buffer.empty() && std::fwrite(buffer.data(), 1, buffer.size(), file) != buffer.size()) {
+      outputError(path, std::string("cannot write (") + std::strerror(errno) + ")", "check the free space");
+    }
+    buffer.clear();
+  }
+  void maybeFlush() {
+    if (buffer.size() >= (std::size_t{1} << 20)) flush();
+  }
+  // Appends the whole part to `out`.
+  void copyTo(AtomicFile& out) {
+    flush();
+    std::rewind(file);
+    char chunk[1 << 16];
+    std::size_t got = 0;
+    while ((got = std::fread(chunk, 1, sizeof chunk, file)) > 0) {
+      out.buffer().append(chunk, got);
+      out.maybeFlush();
+    }
+    if (std::ferror(file)) {
+      outputError(path, std::string("cannot read back (") + std::strerror(errno) + ")", "check the disk");
+    }
+  }
+};
+
+TinFileStream::TinFileStream(const std::string& path) : path_(path), format_(tinFileFormatFor(path)) {
+  vertices_ = std::make_unique<Part>(path + ".vertices.tmp");
+  triangles_ = std::make_unique<Part>(path + ".triangles.tmp");
+}
+
+TinFileStream::~TinFileStream() = default;
+
+std::uint32_t TinFileStream::addVertex(const std::array<double, 3>& position) {
+  TERRATILES_ASSERT(std::isfinite(position[0]) && std::isfinite(position[1]) && std::isfinite(position[2]));
+  if (vertex_count_ >= std::numeric_limits<std::uint32_t>::max()) {
+    outputError(path_, "more than 4,294,967,295 vertices, the most 32-bit indices can count",
+                "raise --tin-max-error or split the input");
+  }
+  appendVertexRecord(format_, vertices_->buffer, position);
+  vertices_->maybeFlush();
+  return static_cast<std::uint32_t>(vertex_count_++);
+}
+
+void TinFileStream::addTriangle(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+  TERRATILES_ASSERT(a < vertex_count_ && b < vertex_count_ && c < vertex_count_);
+  appendTriangleRecord(format_, triangles_->buffer, a, b, c);
+  triangles_->maybeFlush();
+  ++triangle_count_;
+}
+
+void TinFileStream::commit() {
+  AtomicFile file(path_);
+  appendHeader(format_, file.buffer(), vertex_count_, triangle_count_);
+  vertices_->copyTo(file);
+  triangles_->copyTo(file);
+  file.commit();
+  vertices_.reset();
+  triangles_.reset();
+}
 
 TinFileFormat tinFileFormatFor(const std::string& path) {
   const std::string extension = lowercase(fs::path(path).extension().string());

@@ -31,6 +31,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -61,6 +62,35 @@ void writeTinFile(const CrsTin& tin, const std::string& path);
 // vertex by vertex: writes the file toCrsTin's result would give, without that copy.
 void writeTinFile(const TinMesh& mesh, double origin_x, double origin_y, double pixel_size,
                   const std::string& path);
+
+// Writes a TIN piece by piece, for one too large to hold (a TIN built block by block):
+// vertices and triangles go to two temporary files beside `path` (path + ".vertices.tmp",
+// ".triangles.tmp"), which commit() joins behind the header into `path` (through
+// path + ".tmp", renamed when complete). Without commit() nothing is left behind. The file is
+// the one writeTinFile would write for the same vertices and triangles. Error(Usage) for an
+// unknown extension, Error(Output) when a file cannot be written or past 2^32 - 1 vertices.
+class TinFileStream {
+ public:
+  explicit TinFileStream(const std::string& path);
+  ~TinFileStream();
+  TinFileStream(const TinFileStream&) = delete;
+  TinFileStream& operator=(const TinFileStream&) = delete;
+
+  // A vertex in CRS coordinates (finite); returns its index.
+  std::uint32_t addVertex(const std::array<double, 3>& position);
+  // A triangle of vertices added before (asserted), counter-clockwise seen from above.
+  void addTriangle(std::uint32_t a, std::uint32_t b, std::uint32_t c);
+  std::uint64_t vertexCount() const { return vertex_count_; }
+  std::uint64_t triangleCount() const { return triangle_count_; }
+  void commit();
+
+ private:
+  struct Part;
+  std::string path_;
+  TinFileFormat format_;
+  std::unique_ptr<Part> vertices_, triangles_;
+  std::uint64_t vertex_count_ = 0, triangle_count_ = 0;
+};
 
 // Reads a TIN from `path` in the format of its extension. Guarantees on return: at least one
 // triangle, every index below positions.size(), every coordinate finite. Throws Error(Usage)

@@ -5,6 +5,10 @@
 // NaN. Vertex positions are pixel centres: pixel (col, row) is at
 //   x = origin_x + (col + 0.5) * pixel_size_x,  y = origin_y - (row + 0.5) * pixel_size_y
 // where (origin_x, origin_y) is the north-west corner of the raster, in CRS units.
+// A window of a larger lattice (readDemWindow) places its pixels from the lattice's corner
+// instead: pixel (col, row) of the window is pixel (col_offset + col, row_offset + row) of the
+// lattice, at the very same coordinates bit for bit, so two windows (blocks) that share pixels
+// place them, and everything measured on them, identically.
 
 #include <cmath>
 #include <cstddef>
@@ -30,6 +34,12 @@ struct DemGrid {
   std::string crs_wkt;      // WKT2 of the horizontal CRS
   std::string crs_name;     // for messages and reports, e.g. "EPSG:2056"
   std::vector<float> heights_m;  // width * height, NaN where there is no data
+  // A window of a larger lattice: its place in it and the lattice's north-west corner (both
+  // unused while the offsets are 0).
+  std::int64_t col_offset = 0;
+  std::int64_t row_offset = 0;
+  double lattice_origin_x = 0;
+  double lattice_origin_y = 0;
 
   static constexpr float kNoData = std::numeric_limits<float>::quiet_NaN();
 
@@ -42,7 +52,11 @@ struct DemGrid {
     return !std::isnan(heights_m[index(col, row)]);
   }
   CrsPoint pixelCentre(double col, double row) const {
-    return {origin_x + (col + 0.5) * pixel_size_x, origin_y - (row + 0.5) * pixel_size_y};
+    if (col_offset == 0 && row_offset == 0) {
+      return {origin_x + (col + 0.5) * pixel_size_x, origin_y - (row + 0.5) * pixel_size_y};
+    }
+    return {lattice_origin_x + (static_cast<double>(col_offset) + col + 0.5) * pixel_size_x,
+            lattice_origin_y - (static_cast<double>(row_offset) + row + 0.5) * pixel_size_y};
   }
 };
 

@@ -49,6 +49,24 @@ struct TinOptions {
   // for 0.01 % fewer triangles than Delatin's single triangulation; 64 is faster still but
   // adds 2 % triangles at 20 m on N57E011.
   std::int32_t block_pixels = 128;
+  // A block of a larger TIN (src/pipeline/block_tin.h): only the pixels of this box of the
+  // grid (columns x0..x1, rows y0..y1, inclusive) are triangulated; the grid holds the box and,
+  // where the box has a neighbour, one pixel around it (for the slope across the outline).
+  // The box's outline is always fixed, chosen in 1D from its own pixels and their neighbours
+  // (windowed as above, windows counted from the box's corner), so the block on the other
+  // side, built on its own, chooses the same polyline. An empty box (x1 < x0): the whole grid.
+  struct Box {
+    std::int32_t x0 = 0, y0 = 0, x1 = -1, y1 = -1;
+    bool empty() const { return x1 < x0 || y1 < y0; }
+  };
+  Box region{};
+  // Sides of `region` a neighbouring block shares (kWestSide | kNorthSide | ...): their
+  // polylines never change. On the globe, a pixel of one that a triangle as drawn misses by
+  // more than the bound (rare: the 1D choice cannot see a triangle's cross slope) is repaired
+  // inside the block: the pixels next to it on the inner side become vertices. Other sides
+  // take such a pixel into their polyline, as window borders do.
+  std::uint8_t shared_sides = 0;
+  static constexpr std::uint8_t kWestSide = 1, kNorthSide = 2, kEastSide = 4, kSouthSide = 8;
   // The DEM on the globe (for the DEM that is built): the error is measured on the triangle as
   // a renderer draws it, straight in ECEF, along each pixel's vertical (DemOnGlobe), so long
   // edges over flat ground are refined where their sag would break the bound. nullptr: in
@@ -77,6 +95,12 @@ struct ConstrainedTin {
   // Segments, or pieces of them, left out: over nodata or out of the grid (counted by the
   // reader), or whose edge fell in a triangle over nodata (counted here).
   std::size_t edges_dropped = 0;
+  // A block's shared-side pixels (TinOptions::shared_sides) that a triangle as drawn still
+  // missed by more than the bound after 16 rounds of repair: left so (the TIN's measure shows
+  // their error), since the polyline the neighbour shares cannot change.
+  std::size_t shared_outline_misses = 0;
+  // Of those pixels, how many were missed at all (and repaired by vertices next to them).
+  std::size_t shared_outline_repairs = 0;
 };
 
 // Greedy insertion with break lines: every segment is inserted as a constrained edge (a

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <functional>
 #include <initializer_list>
+#include <iterator>
 #include <limits>
 #include <string>
 #include <vector>
@@ -171,6 +172,37 @@ TEST_SUITE("formats") {
       writeTinFile(tin, path);
       checkSameTin(readTinFile(path), tin);
       CHECK_FALSE(fs::exists(path + ".tmp"));
+    }
+  }
+
+  TEST_CASE("a TIN streamed piece by piece is the file writeTinFile writes, and nothing is left without commit") {
+    test::TempDir dir;
+    const CrsTin tin = awkwardTin();
+    const auto bytes = [](const std::string& path) {
+      std::ifstream in(path, std::ios::binary);
+      return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    for (const std::string name : {"tin.off", "tin.obj", "tin.ply"}) {
+      CAPTURE(name);
+      writeTinFile(tin, dir / ("whole." + name));
+      {
+        TinFileStream stream(dir / name);
+        for (std::size_t v = 0; v < tin.positions.size(); ++v) CHECK(stream.addVertex(tin.positions[v]) == v);
+        const auto& idx = tin.triangle_indices;
+        for (std::size_t t = 0; t < idx.size(); t += 3) stream.addTriangle(idx[t], idx[t + 1], idx[t + 2]);
+        CHECK(stream.triangleCount() == tin.triangleCount());
+        CHECK_FALSE(fs::exists(dir / name));  // nothing at the final name before commit
+        stream.commit();
+      }
+      CHECK(bytes(dir / name) == bytes(dir / ("whole." + name)));
+      {
+        TinFileStream abandoned(dir / ("abandoned." + name));
+        abandoned.addVertex({1, 2, 3});
+      }
+      for (const auto& entry : fs::directory_iterator(dir.path())) {
+        CHECK(entry.path().filename().string().find("abandoned") == std::string::npos);
+        CHECK(entry.path().extension() != ".tmp");
+      }
     }
   }
 

@@ -5,6 +5,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -50,5 +53,52 @@ TEST_SUITE("cli") {
     CHECK(test::runTerratiles({"levels", input, "-o", dir / "x", "--level-ratio", "1.5"}).exit_code == 2);
     CHECK(test::runTerratiles({"levels", input, "-o", dir / "y", "--partitioner", "kway"}).exit_code == 2);
     CHECK_FALSE(std::filesystem::exists(dir.path() / "x"));
+  }
+
+  TEST_CASE("levels in blocks: every level of every block on its own, stitched, within its budget, outlines kept") {
+    test::TempDir dir;
+    const std::string input = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+    const DemGrid dem = readDem({input});
+    const std::string output = dir / "levels";
+    // 12 blocks of 100 px (the raster is 400 x 210), four coarser levels each.
+    const auto result = test::runTerratiles({"levels", input, "-o", output, "--levels", "4", "--block-pixels", "100"});
+    REQUIRE(result.exit_code == 0);
+    CHECK(result.err.find("(12 blocks of 100 px") != std::string::npos);
+    std::ifstream file(std::filesystem::path(output) / "levels.json");
+    const nlohmann::json summary = nlohmann::json::parse(file);
+    CHECK(summary["blocks"] == 12);
+    const auto& levels = summary["levels"];
+    REQUIRE(levels.size() == 5);
+    // The block borders' vertices of level 0 (the TIN), in every level.
+    const auto onBlockBorder = [&](const std::array<double, 3>& p) {
+      const double col = (p[0] - dem.origin_x) / dem.pixel_size_x - 0.5, row = (dem.origin_y - p[1]) / dem.pixel_size_y - 0.5;
+      const auto onLine = [](double x) { return std::fabs(x - 100 * std::round(x / 100)) < 1e-6 && std::round(x) > 0; };
+      return (onLine(col) && col < dem.width - 1.5) || (onLine(row) && row < dem.height - 1.5);
+    };
+    std::vector<std::array<double, 3>> border;
+    std::size_t previous_triangles = 0;
+    for (std::size_t l = 0; l < levels.size(); ++l) {
+      CAPTURE(l);
+      const std::string path = (std::filesystem::path(output) / levels[l]["file"].get<std::string>()).string();
+      // Level l's budget is 0.5 m * 2^l (level 0: the TIN's own bound).
+      const auto triangles = test::checkStitchedTin(path, dem, 0.5 * std::pow(2.0, static_cast<double>(l)), 0);
+      CHECK(triangles.size() == levels[l]["triangles"].get<std::size_t>());
+      if (l > 0) CHECK(triangles.size() < previous_triangles);
+      previous_triangles = triangles.size();
+      std::vector<std::array<double, 3>> positions = readTinFile(path).positions;
+      std::sort(positions.begin(), positions.end());
+      if (l == 0) {
+        for (const auto& p : positions) {
+          if (onBlockBorder(p)) border.push_back(p);
+        }
+        CHECK(border.size() > 100);
+      }
+      CHECK(std::includes(positions.begin(), positions.end(), border.begin(), border.end()));
+    }
+    // Blocks need a fixed number of levels.
+    const auto no_levels = test::runTerratiles({"levels", input, "-o", dir / "z", "--block-pixels", "100"});
+    CHECK(no_levels.exit_code == 2);
+    CHECK(no_levels.err.find("--block-pixels needs --levels N") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.path() / "z"));
   }
 }

@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <filesystem>
+#include <set>
 
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
@@ -13,6 +14,7 @@
 #include "tests/test_support.h"
 
 using namespace terratiles;
+
 
 TEST_SUITE("cli") {
   TEST_CASE("tin writes the Interlaken TIN in every format within the bound on every pixel") {
@@ -48,5 +50,47 @@ TEST_SUITE("cli") {
     CHECK(stl.exit_code == 2);
     CHECK(stl.err.find("expected .off, .obj or .ply") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir.path() / "x.stl"));
+  }
+
+  TEST_CASE("tin in blocks: each block read and triangulated on its own gives one seamless TIN within the bound") {
+    test::TempDir dir;
+    {
+      // SRTM Gabon (2401 x 1201 px, longitude/latitude) in 15 blocks of 512 px: windows of 128
+      // px from each block's corner are the whole build's windows, and the 1D choice of a
+      // border depends only on its pixels, so the blocks make the very TIN of the whole build.
+      const std::string input = test::sharedData("srtm3_N00E010-E011_4326.tif");
+      const DemGrid dem = readDem({input});
+      const auto whole = test::runTerratiles({"tin", input, "-o", dir / "whole.ply", "--tin-max-error", "5", "-q"});
+      REQUIRE(whole.exit_code == 0);
+      const auto blocks = test::runTerratiles(
+          {"tin", input, "-o", dir / "blocks.ply", "--tin-max-error", "5", "--block-pixels", "512"});
+      REQUIRE(blocks.exit_code == 0);
+      CHECK(blocks.err.find("(15 blocks;") != std::string::npos);
+      const std::size_t uncovered_whole =
+          test::measureOnGlobe(dem, toGridTin(readTinFile(dir / "whole.ply"), dem.origin_x, dem.origin_y,
+                                              dem.pixel_size_x)).uncovered_valid_pixels;
+      const auto block_triangles = test::checkStitchedTin(dir / "blocks.ply", dem, 5.0, uncovered_whole);
+      const auto whole_triangles = test::checkStitchedTin(dir / "whole.ply", dem, 5.0, uncovered_whole);
+      CHECK(block_triangles.size() > 1'000'000);
+      CHECK(block_triangles == whole_triangles);
+    }
+    {
+      // Interlaken (EPSG:2056: pixels placed one by one, 48 bytes each) in 24 blocks of 64 px at
+      // 0.5 m: blocks of their own windows, still one TIN within the bound.
+      const std::string input = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+      const DemGrid dem = readDem({input});
+      const auto blocks = test::runTerratiles(
+          {"tin", input, "-o", dir / "interlaken.off", "--tin-max-error", "0.5", "--block-pixels", "64", "-q"});
+      REQUIRE(blocks.exit_code == 0);
+      CHECK(test::checkStitchedTin(dir / "interlaken.off", dem, 0.5, 0).size() > 90'000);
+    }
+    // Blocks of one pixel cannot be; break lines do not cross blocks yet.
+    const std::string input = test::sharedData("ch_dhm25_interlaken_25m_2056.tif");
+    CHECK(test::runTerratiles({"tin", input, "-o", dir / "x.ply", "--block-pixels", "1"}).exit_code == 2);
+    const auto constrained = test::runTerratiles({"tin", input, "-o", dir / "x.ply", "--block-pixels", "64",
+                                                  "--constraints", test::sharedData("ch_dhm25_interlaken_25m_2056.tif")});
+    CHECK(constrained.exit_code == 2);
+    CHECK(constrained.err.find("--constraints is not available with blocks") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.path() / "x.ply"));
   }
 }

@@ -31,6 +31,7 @@
 #include "formats/output_directory.h"
 #include "formats/tin/tin_file.h"
 #include "formats/vector/read_break_lines.h"
+#include "src/pipeline/block_tin.h"
 #include "src/pipeline/build_report.h"
 #include "src/pipeline/check_output.h"
 #include "src/lod/build_levels.h"
@@ -308,7 +309,90 @@ struct TinCommandOptions {
   std::string constraints;  // break lines (OGR vector file), or empty
   bool force = false;
   HeightChoice heights;
+  // Blocks of this many pixels per side, each read and triangulated on its own (bounded
+  // memory); 0: blocks of kTinBlockPixels when the mosaic has more than kTinBlocksAbovePixels.
+  std::int32_t block_pixels = 0;
 };
+
+constexpr std::int32_t kTinBlockPixels = 2048;
+constexpr std::int64_t kTinBlocksAbovePixels = 64'000'000;
+
+void printTinSummary(std::ostream& err, const std::string& output, const std::string& crs_name, std::uint64_t vertices,
+                     std::uint64_t triangles, const TinErrorStatistics& errors, double bound_m, double seconds,
+                     const std::string& blocks) {
+  char line[640];
+  std::snprintf(line, sizeof line,
+                "terratiles: wrote %s (%s): %llu vertices, %llu triangles; measured on %zu pixels%s: "
+                "max error %.4f m (bound %.4g m), rms %.4f m; %.2f s\n",
+                output.c_str(), crs_name.c_str(), static_cast<unsigned long long>(vertices),
+                static_cast<unsigned long long>(triangles), errors.measured_pixels, blocks.c_str(), errors.max_error_m,
+                bound_m, errors.rms_error_m, seconds);
+  err << line << std::flush;
+}
+
+// `terratiles tin` on a mosaic cut into blocks (src/pipeline/block_tin.h): blocks in row-major
+// order, each read, triangulated, measured and appended to the file, border vertices stitched.
+void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosaic, std::int32_t block_pixels,
+                        Progress& progress, bool quiet, std::ostream& err,
+                        std::chrono::steady_clock::time_point start) {
+  if (!options.constraints.empty()) {
+    throw Error(ErrorCode::Usage, "--constraints is not available with blocks yet (the mosaic has " +
+                                      std::to_string(mosaic.width * mosaic.height) +
+                                      " pixels); pass --block-pixels larger than its sides, or split the input");
+  }
+  const std::optional<GeoidGrid> geoid = options.heights.geoid();
+  const BlockGrid grid = regularBlockGrid(mosaic.width, mosaic.height, block_pixels);
+  BlockTinOptions block_options;
+  block_options.max_error_m = options.max_error_m;
+  block_options.geoid = geoid ? &*geoid : nullptr;
+  TinFileStream file(options.output);
+  BlockVertexNumbering numbering;
+  TinErrorStatistics errors;
+  double sum_squares = 0;
+  std::size_t repairs = 0, misses = 0;
+  progress.beginStage("TIN in " + std::to_string(grid.blockCount()) + " blocks of " + std::to_string(block_pixels) +
+                          " pixels (read, greedy insertion, measure)",
+                      grid.blockCount());
+  for (std::size_t j = 0; j < grid.rowCount(); ++j) {
+    for (std::size_t i = 0; i < grid.columnCount(); ++i) {
+      const BlockTin block = buildBlockTin(mosaic, grid, i, j, block_options);
+      const std::vector<std::uint32_t> numbers =
+          numbering.number(block, grid, [&](double col, double row, double height) {
+            return file.addVertex({mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
+                                   mosaic.origin_y - (row + 0.5) * mosaic.pixel_size, height});
+          });
+      const std::vector<std::uint32_t>& idx = block.mesh.triangle_indices;
+      for (std::size_t t = 0; t < idx.size(); t += 3) file.addTriangle(numbers[idx[t]], numbers[idx[t + 1]], numbers[idx[t + 2]]);
+      errors.max_error_m = std::max(errors.max_error_m, block.errors.max_error_m);
+      sum_squares += block.errors.rms_error_m * block.errors.rms_error_m * static_cast<double>(block.errors.measured_pixels);
+      errors.measured_pixels += block.errors.measured_pixels;
+      errors.uncovered_valid_pixels += block.errors.uncovered_valid_pixels;
+      repairs += block.outline_repairs;
+      misses += block.outline_misses;
+      progress.advance();
+    }
+  }
+  progress.endStage();
+  if (repairs > 0) {
+    progress.note("TIN: " + std::to_string(repairs) + " pixels on block borders that a triangle missed were repaired " +
+                  "with vertices beside them" +
+                  (misses ? ", " + std::to_string(misses) + " still over the bound (see the max error)" : std::string()));
+  }
+  if (file.triangleCount() == 0) {
+    throw Error(ErrorCode::Input, options.inputs.front() + ": no triangle can be built: the DEM has no three "
+                                  "neighbouring valid pixels; expected a DEM with some contiguous data");
+  }
+  errors.rms_error_m = errors.measured_pixels ? std::sqrt(sum_squares / static_cast<double>(errors.measured_pixels)) : 0;
+  progress.beginStage("writing the TIN file", 0);
+  file.commit();
+  progress.endStage();
+  if (!quiet) {
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    printTinSummary(err, options.output, mosaic.crs_name, file.vertexCount(), file.triangleCount(), errors,
+                    options.max_error_m, seconds,
+                    " (" + std::to_string(grid.blockCount()) + " blocks; border pixels measured in both blocks)");
+  }
+}
 
 // `terratiles tin`: DEM -> greedy-insertion TIN -> OFF/OBJ/PLY in the DEM's CRS.
 void runTinCommand(const TinCommandOptions& options, Progress& progress, bool quiet, std::ostream& err) {
@@ -318,7 +402,20 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   if (std::filesystem::exists(options.output, ec) && !options.force) {
     throw Error(ErrorCode::Output, options.output + ": file exists; use --force to replace it");
   }
-  DemGrid dem = readDem(options.inputs, "reading DEM", progress);
+  if (options.block_pixels < 0 || options.block_pixels == 1) {
+    throw Error(ErrorCode::Usage, "--block-pixels is " + std::to_string(options.block_pixels) +
+                                      "; expected 0 (blocks above " + std::to_string(kTinBlocksAbovePixels) +
+                                      " pixels) or at least 2");
+  }
+  const DemMosaic mosaic = scanDemMosaic(options.inputs, &progress);
+  const std::int64_t pixels = mosaic.width * mosaic.height;
+  const std::int32_t block_pixels =
+      options.block_pixels > 0 ? options.block_pixels : pixels > kTinBlocksAbovePixels ? kTinBlockPixels : 0;
+  if (block_pixels > 0 && (mosaic.width > block_pixels + 2 || mosaic.height > block_pixels + 2)) {
+    runBlockTinCommand(options, mosaic, block_pixels, progress, quiet, err, start);
+    return;
+  }
+  DemGrid dem = readDem(mosaic, "reading DEM", progress);
   const std::optional<GeoidGrid> geoid = options.heights.geoid();
   progress.endStage();
   TinErrorStatistics errors;
@@ -337,14 +434,8 @@ void runTinCommand(const TinCommandOptions& options, Progress& progress, bool qu
   writeTinFile(mesh, dem.origin_x, dem.origin_y, dem.pixel_size_x, options.output);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!quiet) {
-    char line[512];
-    std::snprintf(line, sizeof line,
-                  "terratiles: wrote %s (%s): %zu vertices, %zu triangles; measured on %zu pixels: "
-                  "max error %.4f m (bound %.4g m), rms %.4f m; %.2f s\n",
-                  options.output.c_str(), dem.crs_name.c_str(), vertex_count,
-                  triangle_count, errors.measured_pixels, errors.max_error_m,
-                  options.max_error_m, errors.rms_error_m, seconds);
-    err << line << std::flush;
+    printTinSummary(err, options.output, dem.crs_name, vertex_count, triangle_count, errors, options.max_error_m,
+                    seconds, "");
   }
 }
 
@@ -370,7 +461,119 @@ struct LevelsCommandOptions {
   int threads = 0;  // 0: all cores
   LevelOptions levels;
   HeightChoice heights;
+  std::int32_t block_pixels = 0;  // > 0: every block's levels on its own, block borders locked
 };
+
+// `terratiles levels --block-pixels N`: every block's TIN and levels on its own
+// (src/pipeline/block_tin.h), its outline locked at every level, each level stitched into one
+// file. Measures what block borders cost against the whole build. A block whose levels stop
+// early (its locked outline dominates) shows its coarsest level at the coarser ones.
+void runBlockLevelsCommand(const LevelsCommandOptions& options, const DemMosaic& mosaic, OutputDirectory& directory,
+                           Progress& progress, bool quiet, std::ostream& err,
+                           std::chrono::steady_clock::time_point start) {
+  if (options.levels.coarser_levels < 1 || !options.constraints.empty() || options.random_constraints > 0) {
+    throw Error(ErrorCode::Usage, "--block-pixels needs --levels N (the number of levels every block builds) and "
+                                  "takes no --constraints or --random-constraints yet");
+  }
+  const std::optional<GeoidGrid> geoid = options.heights.geoid();
+  const BlockGrid grid = regularBlockGrid(mosaic.width, mosaic.height, options.block_pixels);
+  BlockTinOptions tin_options;
+  tin_options.max_error_m = options.tin_max_error_m;
+  tin_options.measure = false;  // buildLevels measures level 0
+  const std::size_t level_count = static_cast<std::size_t>(options.levels.coarser_levels) + 1;
+  struct LevelFile {
+    std::string name;
+    std::unique_ptr<TinFileStream> stream;
+    BlockVertexNumbering numbering;
+    double max_error_m = 0, sum_squares = 0;
+    std::size_t measured_pixels = 0, uncovered_valid_pixels = 0, clusters = 0, edges = 0;
+  };
+  std::vector<LevelFile> files(level_count);
+  for (std::size_t l = 0; l < level_count; ++l) {
+    files[l].name = "level_" + std::to_string(l) + "." + options.format;
+    files[l].stream = std::make_unique<TinFileStream>((directory.staging() / files[l].name).string());
+  }
+  progress.beginStage("levels in " + std::to_string(grid.blockCount()) + " blocks of " +
+                          std::to_string(options.block_pixels) + " pixels",
+                      grid.blockCount());
+  for (std::size_t j = 0; j < grid.rowCount(); ++j) {
+    for (std::size_t i = 0; i < grid.columnCount(); ++i) {
+      const BlockGround ground = readBlock(mosaic, grid, i, j, geoid ? &*geoid : nullptr);
+      BlockTin tin = buildBlockTin(ground, tin_options);
+      BlockTin shell;  // the block's place, for the numbering of every level
+      shell.column = tin.column;
+      shell.row = tin.row;
+      shell.window = tin.window;
+      const std::vector<Level> levels = buildBlockLevels(ground, std::move(tin), options.levels);
+      for (std::size_t l = 0; l < level_count && !levels.empty(); ++l) {
+        const Level& level = levels[std::min(l, levels.size() - 1)];
+        LevelFile& file = files[l];
+        shell.mesh.vertices = level.mesh.vertices;
+        const std::vector<std::uint32_t> numbers =
+            file.numbering.number(shell, grid, [&](double col, double row, double height) {
+              return file.stream->addVertex({mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
+                                             mosaic.origin_y - (row + 0.5) * mosaic.pixel_size, height});
+            });
+        const std::vector<std::uint32_t>& idx = level.mesh.triangle_indices;
+        for (std::size_t t = 0; t < idx.size(); t += 3) {
+          file.stream->addTriangle(numbers[idx[t]], numbers[idx[t + 1]], numbers[idx[t + 2]]);
+        }
+        file.max_error_m = std::max(file.max_error_m, level.error.max_error_m);
+        file.sum_squares += level.error.rms_error_m * level.error.rms_error_m *
+                            static_cast<double>(level.error.measured_pixels);
+        file.measured_pixels += level.error.measured_pixels;
+        file.uncovered_valid_pixels += level.error.uncovered_valid_pixels;
+        file.clusters += static_cast<std::size_t>(std::max(level.partition.cluster_count, 0));
+        file.edges += level.edge_count;
+      }
+      progress.advance();
+    }
+  }
+  progress.endStage();
+  nlohmann::json summary;
+  summary["generator"] = std::string("terratiles ") + kVersion;
+  summary["inputs"] = options.inputs;
+  summary["crs"] = mosaic.crs_name;
+  summary["tin_max_error_m"] = options.tin_max_error_m;
+  summary["block_pixels"] = options.block_pixels;
+  summary["blocks"] = grid.blockCount();
+  summary["cluster_triangles"] = options.levels.cluster_triangles;
+  summary["level_ratio"] = options.levels.level_ratio;
+  summary["level_error_growth"] = options.level_error_growth;
+  std::ostringstream table;
+  table << "level  triangles   vertices  clusters   max error   rms error  file   (" << grid.blockCount()
+        << " blocks of " << options.block_pixels << " px; border pixels measured in both blocks)\n";
+  for (std::size_t l = 0; l < level_count; ++l) {
+    LevelFile& file = files[l];
+    progress.beginStage("writing " + file.name, 0);
+    const std::uint64_t triangles = file.stream->triangleCount(), vertices = file.stream->vertexCount();
+    file.stream->commit();
+    progress.endStage();
+    const double rms = file.measured_pixels ? std::sqrt(file.sum_squares / static_cast<double>(file.measured_pixels)) : 0;
+    summary["levels"].push_back({{"level", l},
+                                 {"file", file.name},
+                                 {"triangles", triangles},
+                                 {"vertices", vertices},
+                                 {"clusters", file.clusters},
+                                 {"max_error_m", file.max_error_m},
+                                 {"rms_error_m", rms},
+                                 {"measured_pixels", file.measured_pixels},
+                                 {"uncovered_valid_pixels", file.uncovered_valid_pixels}});
+    char line[160];
+    std::snprintf(line, sizeof line, "%5zu %10llu %10llu %9zu %9.3f m %9.3f m  %s\n", l,
+                  static_cast<unsigned long long>(triangles), static_cast<unsigned long long>(vertices), file.clusters,
+                  file.max_error_m, rms, file.name.c_str());
+    table << line;
+  }
+  directory.writeFile("levels.json", summary.dump(2) + "\n");
+  directory.commit();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!quiet) {
+    err << table.str() << "terratiles: wrote " << level_count << " levels to " << options.output << " ("
+        << mosaic.crs_name << ", " << grid.blockCount() << " blocks); " << std::fixed << std::setprecision(2)
+        << seconds << " s\n" << std::flush;
+  }
+}
 
 // `terratiles levels`: DEM -> TIN -> the cluster levels of detail, each written as a TIN file
 // in the DEM's CRS, with levels.json (what each level is and its measured error).
@@ -381,13 +584,6 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
     thread_limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(options.threads));
   }
   OutputDirectory directory(options.output, options.force, "levels.json");
-  const DemGrid dem = readDem(options.inputs, "reading DEM", progress);
-  const std::optional<GeoidGrid> geoid = options.heights.geoid();
-  progress.endStage();
-  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
-  options.levels.globe = &globe;
-  ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
-  TinMesh tin = std::move(finest.mesh);
   options.levels.partitioner = options.partitioner == "random" ? Partitioner::Random : Partitioner::Metis;
   // regional: square cells of the grid of about 64 clusters each (build's tile neighbourhoods
   // hold 2 x 2 tiles of 16).
@@ -397,6 +593,18 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
     options.levels.level_error_growth = options.level_error_growth;
     options.levels.first_budget_m = options.tin_max_error_m * options.level_error_growth;
   }
+  const DemMosaic mosaic = scanDemMosaic(options.inputs, &progress);
+  if (options.block_pixels > 0) {
+    runBlockLevelsCommand(options, mosaic, directory, progress, quiet, err, start);
+    return;
+  }
+  const DemGrid dem = readDem(mosaic, "reading DEM", progress);
+  const std::optional<GeoidGrid> geoid = options.heights.geoid();
+  progress.endStage();
+  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr, &progress);
+  options.levels.globe = &globe;
+  ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
+  TinMesh tin = std::move(finest.mesh);
   std::vector<std::array<std::uint32_t, 2>> constraints = std::move(finest.constrained_edges);
   const std::size_t break_line_edges = constraints.size();
   if (options.random_constraints > 0) {
@@ -635,6 +843,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Largest vertical error in metres allowed at any pixel")
       ->capture_default_str();
   tin_command->add_option("--constraints", tin.constraints, kConstraintsHelp);
+  tin_command->add_option(
+      "--block-pixels", tin.block_pixels,
+      "Cut the mosaic into blocks of this many pixels per side, each read and triangulated on its own in bounded "
+      "memory, their outlines chosen so that neighbours meet vertex for vertex (0: blocks of 2048 when the mosaic "
+      "has more than 64 M pixels)")
+      ->capture_default_str();
   addHeightOptions(*tin_command, tin.heights.heights, tin.heights.geoid_path);
   tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
   addProgressOptions(*tin_command, quiet, progress_choice);
@@ -700,6 +914,13 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->check(CLI::IsMember({"ply", "off", "obj"}))
       ->capture_default_str();
   levels_command->add_option("--threads", levels.threads, "Threads to use (0: all cores); the output is the same")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  levels_command
+      ->add_option("--block-pixels", levels.block_pixels,
+                   "Cut the mosaic into blocks of this many pixels per side and build every block's TIN and levels "
+                   "on its own, its outline locked at every level (needs --levels N; measures what block borders "
+                   "cost against the whole build; 0: one build)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   levels_command->add_flag("-f,--force", levels.force, "Replace OUTDIR when it holds a previous levels output");
