@@ -1,7 +1,13 @@
 #include "src/pipeline/block_tin.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 
 #include "src/base/error.h"
 #include "src/geo/dem_on_globe.h"
@@ -108,6 +114,116 @@ std::vector<Level> buildBlockLevels(const BlockGround& ground, BlockTin tin, Lev
   const std::size_t apron = apronValidPixels(ground);
   for (Level& level : levels) level.error.uncovered_valid_pixels -= std::min(apron, level.error.uncovered_valid_pixels);
   return levels;
+}
+
+namespace {
+
+constexpr char kBlockMagic[8] = {'T', 'T', 'B', 'L', 'O', 'C', 'K', '1'};
+
+template <typename T>
+void put(std::string& out, const T& value) {
+  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+template <typename T>
+void putArray(std::string& out, const std::vector<T>& values) {
+  put(out, static_cast<std::uint64_t>(values.size()));
+  out.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T));
+}
+
+// Reads what put wrote, refusing to run past the end.
+struct Reader {
+  const std::string& path;
+  const std::string& bytes;
+  std::size_t at = 0;
+  template <typename T>
+  T get() {
+    need(sizeof(T));
+    T value;
+    std::memcpy(&value, bytes.data() + at, sizeof(T));
+    at += sizeof(T);
+    return value;
+  }
+  template <typename T>
+  std::vector<T> getArray() {
+    const auto count = get<std::uint64_t>();
+    if (count > (bytes.size() - at) / sizeof(T)) damaged();
+    std::vector<T> values(count);
+    std::memcpy(values.data(), bytes.data() + at, count * sizeof(T));
+    at += count * sizeof(T);
+    return values;
+  }
+  void need(std::size_t size) const {
+    if (bytes.size() - at < size) damaged();
+  }
+  [[noreturn]] void damaged() const {
+    throw Error(ErrorCode::Input, path + ": not a whole terratiles block file (damaged, or from another version); "
+                                         "expected one this version wrote; run again without --resume");
+  }
+};
+
+}  // namespace
+
+void writeBlockTinFile(const BlockTin& block, const std::string& path) {
+  std::string out(kBlockMagic, sizeof kBlockMagic);
+  put(out, static_cast<std::uint64_t>(block.column));
+  put(out, static_cast<std::uint64_t>(block.row));
+  put(out, block.window.col0);
+  put(out, block.window.row0);
+  put(out, block.window.width);
+  put(out, block.window.height);
+  putArray(out, block.mesh.vertices);
+  putArray(out, block.mesh.triangle_indices);
+  const TinErrorStatistics& e = block.errors;
+  for (const double value : {e.max_error_m, e.rms_error_m}) put(out, value);
+  for (const std::size_t value : {e.measured_pixels, e.uncovered_valid_pixels, e.covered_nodata_pixels,
+                                  e.degenerate_triangles, block.outline_repairs, block.outline_misses}) {
+    put(out, static_cast<std::uint64_t>(value));
+  }
+  const std::string temporary = path + ".tmp";
+  std::FILE* file = std::fopen(temporary.c_str(), "wb");
+  const bool written = file && std::fwrite(out.data(), 1, out.size(), file) == out.size();
+  const bool closed = file && std::fclose(file) == 0;
+  std::error_code ec;
+  if (!written || !closed) {
+    std::filesystem::remove(temporary, ec);
+    throw Error(ErrorCode::Output, temporary + ": cannot write a block file (" + std::strerror(errno) +
+                                       "); check the free space and permissions");
+  }
+  std::filesystem::rename(temporary, path, ec);
+  if (ec) throw Error(ErrorCode::Output, path + ": cannot rename the block file into place (" + ec.message() + ")");
+}
+
+BlockTin readBlockTinFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  Reader reader{path, bytes};
+  reader.need(sizeof kBlockMagic);
+  if (std::memcmp(bytes.data(), kBlockMagic, sizeof kBlockMagic) != 0) reader.damaged();
+  reader.at = sizeof kBlockMagic;
+  BlockTin block;
+  block.column = reader.get<std::uint64_t>();
+  block.row = reader.get<std::uint64_t>();
+  block.window.col0 = reader.get<std::int64_t>();
+  block.window.row0 = reader.get<std::int64_t>();
+  block.window.width = reader.get<std::int32_t>();
+  block.window.height = reader.get<std::int32_t>();
+  block.mesh.vertices = reader.getArray<GridPoint>();
+  block.mesh.triangle_indices = reader.getArray<std::uint32_t>();
+  TinErrorStatistics& e = block.errors;
+  e.max_error_m = reader.get<double>();
+  e.rms_error_m = reader.get<double>();
+  e.measured_pixels = reader.get<std::uint64_t>();
+  e.uncovered_valid_pixels = reader.get<std::uint64_t>();
+  e.covered_nodata_pixels = reader.get<std::uint64_t>();
+  e.degenerate_triangles = reader.get<std::uint64_t>();
+  block.outline_repairs = reader.get<std::uint64_t>();
+  block.outline_misses = reader.get<std::uint64_t>();
+  if (reader.at != bytes.size() || block.mesh.triangle_indices.size() % 3 != 0) reader.damaged();
+  for (const std::uint32_t index : block.mesh.triangle_indices) {
+    if (index >= block.mesh.vertices.size()) reader.damaged();
+  }
+  return block;
 }
 
 std::vector<std::uint32_t> BlockVertexNumbering::number(

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -93,6 +94,13 @@ BlockTin buildBlockTin(const DemMosaic& mosaic, const BlockGrid& grid, std::size
 // move from level to level as in a whole build; the block borders stay: what they cost is
 // measured by `terratiles levels --block-pixels` against the whole build.
 std::vector<Level> buildBlockLevels(const BlockGround& ground, BlockTin tin, LevelOptions options);
+
+// A block's TIN as a file, the unit a resumed or multi-process run keeps and hands over:
+// binary, every number as in memory (doubles bit for bit), written through path + ".tmp" and
+// renamed when complete, so a file that exists is whole. readBlockTinFile throws
+// Error(Input) naming the file when it is not one (damaged, another version).
+void writeBlockTinFile(const BlockTin& block, const std::string& path);
+BlockTin readBlockTinFile(const std::string& path);
 
 // Numbers the vertices of blocks handed over in row-major block order as one mesh: a vertex on
 // a block border gets the number it got in the block before (found by its mosaic pixel), every

@@ -4,6 +4,7 @@
 #include <malloc.h>
 #endif
 
+#include "src/base/ranks.h"
 #include "tools/terratiles/run_cli.h"
 
 int main(int argc, char** argv) {
@@ -14,5 +15,9 @@ int main(int argc, char** argv) {
   // higher, with no measurable gain in speed on two cores.
   mallopt(M_ARENA_MAX, 1);
 #endif
-  return terratiles::runCli(std::vector<std::string>(argv, argv + argc), std::cin, std::cout, std::cerr);
+  // Under mpirun or srun: one rank of several (src/base/ranks.h); else a plain process.
+  terratiles::Ranks::start(&argc, &argv);
+  const int code = terratiles::runCli(std::vector<std::string>(argv, argv + argc), std::cin, std::cout, std::cerr);
+  terratiles::Ranks::stop();
+  return code;
 }

@@ -11,9 +11,11 @@
 #include <cstdlib>
 #include <cerrno>
 #include <cstdio>
+#include <exception>
 #include <charconv>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <istream>
 #include <optional>
@@ -22,6 +24,7 @@
 
 #include "src/base/error.h"
 #include "src/base/progress.h"
+#include "src/base/ranks.h"
 #include "src/base/version.h"
 #include "src/geo/point_transform.h"
 #include "src/pipeline/run_pipeline.h"
@@ -312,6 +315,8 @@ struct TinCommandOptions {
   // Blocks of this many pixels per side, each read and triangulated on its own (bounded
   // memory); 0: blocks of kTinBlockPixels when the mosaic has more than kTinBlocksAbovePixels.
   std::int32_t block_pixels = 0;
+  bool resume = false;  // blocks: keep the block files an interrupted run left
+  int threads = 0;      // 0: all cores
 };
 
 constexpr std::int32_t kTinBlockPixels = 2048;
@@ -330,8 +335,21 @@ void printTinSummary(std::ostream& err, const std::string& output, const std::st
   err << line << std::flush;
 }
 
-// `terratiles tin` on a mosaic cut into blocks (src/pipeline/block_tin.h): blocks in row-major
-// order, each read, triangulated, measured and appended to the file, border vertices stitched.
+// Where one rank failed, every rank learns it here (Ranks::agree): the failing one throws
+// its own error, the others one that points at it.
+void meetRanks(const std::exception_ptr& failure) {
+  if (Ranks::agree(failure ? 1 : 0) == 0) return;
+  if (failure) std::rethrow_exception(failure);
+  throw Error(ErrorCode::Internal, "rank " + std::to_string(Ranks::rank()) + " stops: another rank failed (its "
+                                   "error is above)");
+}
+
+// `terratiles tin` on a mosaic cut into blocks (src/pipeline/block_tin.h). Every block's TIN
+// is a file in OUTPUT.blocks/ (written whole or not at all), made by rank b mod N of N (one
+// rank without mpirun); then rank 0 joins them in row-major order, border vertices stitched,
+// into the output file and removes the folder. --resume keeps the block files an interrupted
+// run left (same inputs and options, checked against the folder's manifest.json) and makes
+// only the others: the file is the same, byte for byte, however many ranks or resumptions.
 void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosaic, std::int32_t block_pixels,
                         Progress& progress, bool quiet, std::ostream& err,
                         std::chrono::steady_clock::time_point start) {
@@ -345,17 +363,96 @@ void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosai
   BlockTinOptions block_options;
   block_options.max_error_m = options.max_error_m;
   block_options.geoid = geoid ? &*geoid : nullptr;
+  const std::filesystem::path blocks_dir = options.output + ".blocks";
+  const auto blockPath = [&](std::size_t i, std::size_t j) {
+    return (blocks_dir / ("block_" + std::to_string(j) + "_" + std::to_string(i) + ".bin")).string();
+  };
+  nlohmann::json manifest;
+  manifest["generator"] = std::string("terratiles ") + kVersion;
+  std::vector<std::string> inputs;
+  for (const std::string& input : options.inputs) inputs.push_back(std::filesystem::absolute(input).lexically_normal().string());
+  manifest["inputs"] = inputs;
+  manifest["tin_max_error_m"] = options.max_error_m;
+  manifest["block_pixels"] = block_pixels;
+  manifest["geoid"] = geoid ? geoid->name : std::string("none (heights are ellipsoidal)");
+  const bool leader = Ranks::rank() == 0;
+  Progress quiet_progress;
+  Progress& shown = leader ? progress : quiet_progress;
+
+  // 1. Rank 0 prepares the folder: kept for --resume when it holds the same work, else new.
+  std::exception_ptr failure;
+  if (leader) {
+    try {
+      const std::filesystem::path manifest_path = blocks_dir / "manifest.json";
+      std::error_code ec;
+      bool keep = false;
+      if (std::filesystem::exists(manifest_path, ec)) {
+        std::ifstream in(manifest_path);
+        const nlohmann::json found = nlohmann::json::parse(in, nullptr, false);
+        if (options.resume && found != manifest) {
+          throw Error(ErrorCode::Usage, blocks_dir.string() + " holds the blocks of another run (other inputs, "
+                                        "options or version); run without --resume to start again");
+        }
+        keep = options.resume;
+        if (!keep) progress.note("an interrupted run's blocks in " + blocks_dir.string() + " were dropped (--resume continues them)");
+      }
+      if (!keep) {
+        std::filesystem::remove_all(blocks_dir, ec);
+        std::filesystem::create_directories(blocks_dir, ec);
+        if (ec) {
+          throw Error(ErrorCode::Output, blocks_dir.string() + ": cannot create the folder of the block files (" +
+                                             ec.message() + "); check that the output's folder is writable");
+        }
+        std::ofstream out(manifest_path.string() + ".tmp");
+        out << manifest.dump(2) << "\n";
+        out.close();
+        std::filesystem::rename(manifest_path.string() + ".tmp", manifest_path, ec);
+        if (!out || ec) throw Error(ErrorCode::Output, manifest_path.string() + ": cannot write it; check the free space");
+      }
+    } catch (...) {
+      failure = std::current_exception();
+    }
+  }
+  meetRanks(failure);
+
+  // 2. Every rank makes its blocks that are not there yet.
+  std::size_t reused = 0, mine = 0;
+  const auto ranks = static_cast<std::size_t>(Ranks::size()), rank = static_cast<std::size_t>(Ranks::rank());
+  for (std::size_t b = rank; b < grid.blockCount(); b += ranks) ++mine;
+  shown.beginStage("TIN in " + std::to_string(grid.blockCount()) + " blocks of " + std::to_string(block_pixels) +
+                       " pixels (read, greedy insertion, measure)" +
+                       (ranks > 1 ? ", " + std::to_string(mine) + " on rank 0 of " + std::to_string(ranks) : std::string()),
+                   mine);
+  try {
+    for (std::size_t b = rank; b < grid.blockCount(); b += ranks) {
+      const std::size_t i = b % grid.columnCount(), j = b / grid.columnCount();
+      std::error_code ec;
+      if (options.resume && std::filesystem::exists(blockPath(i, j), ec)) {
+        ++reused;
+      } else {
+        writeBlockTinFile(buildBlockTin(mosaic, grid, i, j, block_options), blockPath(i, j));
+      }
+      shown.advance();
+    }
+    shown.endStage();
+  } catch (...) {
+    failure = std::current_exception();
+  }
+  meetRanks(failure);
+  if (!leader) return;
+  if (reused > 0) progress.note("resumed: " + std::to_string(reused) + " of " + std::to_string(mine) + " blocks were done already");
+
+  // 3. Rank 0 joins the blocks.
   TinFileStream file(options.output);
   BlockVertexNumbering numbering;
   TinErrorStatistics errors;
   double sum_squares = 0;
   std::size_t repairs = 0, misses = 0;
-  progress.beginStage("TIN in " + std::to_string(grid.blockCount()) + " blocks of " + std::to_string(block_pixels) +
-                          " pixels (read, greedy insertion, measure)",
+  progress.beginStage("joining " + std::to_string(grid.blockCount()) + " blocks into " + options.output,
                       grid.blockCount());
   for (std::size_t j = 0; j < grid.rowCount(); ++j) {
     for (std::size_t i = 0; i < grid.columnCount(); ++i) {
-      const BlockTin block = buildBlockTin(mosaic, grid, i, j, block_options);
+      const BlockTin block = readBlockTinFile(blockPath(i, j));
       const std::vector<std::uint32_t> numbers =
           numbering.number(block, grid, [&](double col, double row, double height) {
             return file.addVertex({mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
@@ -385,18 +482,26 @@ void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosai
   errors.rms_error_m = errors.measured_pixels ? std::sqrt(sum_squares / static_cast<double>(errors.measured_pixels)) : 0;
   progress.beginStage("writing the TIN file", 0);
   file.commit();
+  std::error_code ec;
+  std::filesystem::remove_all(blocks_dir, ec);
   progress.endStage();
   if (!quiet) {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::string blocks = " (" + std::to_string(grid.blockCount()) + " blocks";
+    if (ranks > 1) blocks += " on " + std::to_string(ranks) + " ranks";
+    if (reused > 0) blocks += ", " + std::to_string(reused) + " resumed";
     printTinSummary(err, options.output, mosaic.crs_name, file.vertexCount(), file.triangleCount(), errors,
-                    options.max_error_m, seconds,
-                    " (" + std::to_string(grid.blockCount()) + " blocks; border pixels measured in both blocks)");
+                    options.max_error_m, seconds, blocks + "; border pixels measured in both blocks)");
   }
 }
 
 // `terratiles tin`: DEM -> greedy-insertion TIN -> OFF/OBJ/PLY in the DEM's CRS.
 void runTinCommand(const TinCommandOptions& options, Progress& progress, bool quiet, std::ostream& err) {
   const auto start = std::chrono::steady_clock::now();
+  std::optional<tbb::global_control> thread_limit;
+  if (options.threads > 0) {
+    thread_limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(options.threads));
+  }
   tinFileFormatFor(options.output);  // validates the extension before any work
   std::error_code ec;
   if (std::filesystem::exists(options.output, ec) && !options.force) {
@@ -464,6 +569,22 @@ struct LevelsCommandOptions {
   std::int32_t block_pixels = 0;  // > 0: every block's levels on its own, block borders locked
 };
 
+// What levels.json says of the run, whole or in blocks.
+nlohmann::json levelsSummary(const LevelsCommandOptions& options, const std::string& crs_name) {
+  nlohmann::json summary;
+  summary["generator"] = std::string("terratiles ") + kVersion;
+  summary["inputs"] = options.inputs;
+  summary["crs"] = crs_name;
+  summary["tin_max_error_m"] = options.tin_max_error_m;
+  summary["partitioner"] = options.partitioner;
+  summary["partition"] = options.partition_scope;
+  summary["simplifier"] = options.simplifier;
+  summary["cluster_triangles"] = options.levels.cluster_triangles;
+  summary["level_ratio"] = options.levels.level_ratio;
+  summary["level_error_growth"] = options.level_error_growth;
+  return summary;
+}
+
 // `terratiles levels --block-pixels N`: every block's TIN and levels on its own
 // (src/pipeline/block_tin.h), its outline locked at every level, each level stitched into one
 // file. Measures what block borders cost against the whole build. A block whose levels stop
@@ -530,16 +651,9 @@ void runBlockLevelsCommand(const LevelsCommandOptions& options, const DemMosaic&
     }
   }
   progress.endStage();
-  nlohmann::json summary;
-  summary["generator"] = std::string("terratiles ") + kVersion;
-  summary["inputs"] = options.inputs;
-  summary["crs"] = mosaic.crs_name;
-  summary["tin_max_error_m"] = options.tin_max_error_m;
+  nlohmann::json summary = levelsSummary(options, mosaic.crs_name);
   summary["block_pixels"] = options.block_pixels;
   summary["blocks"] = grid.blockCount();
-  summary["cluster_triangles"] = options.levels.cluster_triangles;
-  summary["level_ratio"] = options.levels.level_ratio;
-  summary["level_error_growth"] = options.level_error_growth;
   std::ostringstream table;
   table << "level  triangles   vertices  clusters   max error   rms error  file   (" << grid.blockCount()
         << " blocks of " << options.block_pixels << " px; border pixels measured in both blocks)\n";
@@ -614,17 +728,7 @@ void runLevelsCommand(LevelsCommandOptions options, Progress& progress, bool qui
   const std::size_t constraint_count = constraints.size();
   const std::vector<Level> levels = buildLevels(dem, std::move(tin), options.levels, std::move(constraints), progress);
 
-  nlohmann::json summary;
-  summary["generator"] = std::string("terratiles ") + kVersion;
-  summary["inputs"] = options.inputs;
-  summary["crs"] = dem.crs_name;
-  summary["tin_max_error_m"] = options.tin_max_error_m;
-  summary["partitioner"] = options.partitioner;
-  summary["partition"] = options.partition_scope;
-  summary["simplifier"] = options.simplifier;
-  summary["cluster_triangles"] = options.levels.cluster_triangles;
-  summary["level_ratio"] = options.levels.level_ratio;
-  summary["level_error_growth"] = options.level_error_growth;
+  nlohmann::json summary = levelsSummary(options, dem.crs_name);
   summary["constrained_edges"] = constraint_count;
   summary["break_lines"] = options.constraints.empty() ? nlohmann::json(nullptr)
                                                        : nlohmann::json{{"file", options.constraints},
@@ -849,6 +953,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       "memory, their outlines chosen so that neighbours meet vertex for vertex (0: blocks of 2048 when the mosaic "
       "has more than 64 M pixels)")
       ->capture_default_str();
+  tin_command->add_flag("--resume", tin.resume,
+                        "Blocks: continue an interrupted run (killed, power lost) from the block files it left in "
+                        "OUTPUT.blocks/, making only the missing ones; the file is the same as an uninterrupted run's");
+  tin_command->add_option("--threads", tin.threads, "Threads to use (0: all cores); the output is the same")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   addHeightOptions(*tin_command, tin.heights.heights, tin.heights.geoid_path);
   tin_command->add_flag("-f,--force", tin.force, "Replace an existing output file");
   addProgressOptions(*tin_command, quiet, progress_choice);
@@ -1011,6 +1121,9 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     runLevelsCommand(levels, progress, quiet, err);
     return 0;
   }
+  // Under mpirun: `tin` in blocks spreads them over the ranks; any other command runs on rank
+  // 0 alone, as without mpirun (the others leave at once).
+  if (Ranks::size() > 1 && !tin_command->parsed() && Ranks::rank() != 0) return 0;
   if (tin_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
