@@ -4,7 +4,7 @@
 //
 //   terratiles_bench_scale [--source ETOPO5] [--dir DIR] [--sizes 8640x4320,17280x8640]
 //                          [--tin-max-error 10] [--threads N] [--no-check] [--terratiles PATH]
-//                          [-- BUILD_OPTION...]
+//                          [--command build|tin] [--ranks N] [-- OPTION...]
 //
 // The rasters are ETOPO5 (../shared/data/etopo5_global_4326.tif) resampled in-process with
 // GDALWarp, as `gdalwarp -r cubic -te -180 -90 180 90 -ts W H` (the -te keeps the pixels
@@ -15,6 +15,9 @@
 // it was reached from the `stage_done` lines. Then `terratiles check DIR/out_WxH` (unless
 // --no-check), timed and measured the same way. The table gives seconds, M pixels per second,
 // peak RSS and bytes per pixel, and the ratios of the largest raster to the smallest.
+// --command tin times `terratiles tin RASTER -o DIR/out_WxH.ply` instead (pass --block-pixels
+// after --); --ranks N runs it under `mpirun --allow-run-as-root --oversubscribe -np N` (its
+// peak is the largest process's, as wait4 reports mpirun's reaped children).
 #include <gdal_priv.h>
 #include <gdal_utils.h>
 
@@ -55,6 +58,8 @@ struct BenchOptions {
   bool check = true;
   std::string terratiles;
   std::vector<std::string> build_options;
+  std::string command = "build";  // or "tin"
+  int ranks = 0;                   // > 0: under mpirun -np ranks
 };
 
 constexpr const char* kUsage =
@@ -69,7 +74,9 @@ constexpr const char* kUsage =
     "  --threads        passed to terratiles build (default: not passed, all cores)\n"
     "  --no-check       do not run terratiles check on the outputs\n"
     "  --terratiles     the terratiles executable (default: next to this program)\n"
-    "  -- OPTION...     further options for terratiles build\n";
+    "  --command        build (default) or tin (no check; e.g. -- --block-pixels 2048)\n"
+    "  --ranks          run it under mpirun -np N (with --threads 1: one thread per rank)\n"
+    "  -- OPTION...     further options for the command\n";
 
 Size parseSize(const std::string& text) {
   const std::size_t x = text.find('x');
@@ -115,6 +122,14 @@ BenchOptions parseOptions(int argc, char** argv) {
       if (!(options.tin_max_error_m > 0)) throw Error(ErrorCode::Usage, "--tin-max-error expects metres > 0");
     } else if (arg == "--threads") {
       options.threads = static_cast<int>(bench::parseNumber(value(), arg));
+    } else if (arg == "--command") {
+      options.command = value();
+      if (options.command != "build" && options.command != "tin") {
+        throw Error(ErrorCode::Usage, "--command expects build or tin, found '" + options.command + "'");
+      }
+    } else if (arg == "--ranks") {
+      options.ranks = static_cast<int>(bench::parseNumber(value(), "--ranks"));
+      if (options.ranks < 1) throw Error(ErrorCode::Usage, "--ranks expects at least 1");
     } else if (arg == "--no-check") {
       options.check = false;
     } else if (arg == "--terratiles") {
@@ -189,7 +204,10 @@ Measured measure(const std::vector<std::string>& args, int check_exit = -1) {
   for (std::string line; std::getline(lines, line);) {
     if (!line.starts_with("{")) {
       // check's verdict and the problems it names
-      if (line.find("terratiles check") == 0 || line.find("problem:") != std::string::npos) measured.summary += line + " ";
+      if (line.find("terratiles check") == 0 || line.find("problem:") != std::string::npos ||
+          line.find("terratiles: wrote") == 0) {
+        measured.summary += line + " ";
+      }
       continue;
     }
     const nlohmann::json event = nlohmann::json::parse(line, nullptr, false);
@@ -222,20 +240,24 @@ int runBench(int argc, char** argv) {
   };
   std::vector<Row> rows;
   for (std::size_t i = 0; i < rasters.size(); ++i) {
-    const fs::path out = options.dir / ("out_" + options.sizes[i].text());
+    const bool tin = options.command == "tin";
+    const fs::path out = options.dir / ("out_" + options.sizes[i].text() + (tin ? ".ply" : ""));
     char error_text[32];
     std::snprintf(error_text, sizeof error_text, "%g", options.tin_max_error_m);
-    std::vector<std::string> args{options.terratiles, "build", rasters[i].string(), "-o", out.string(),
+    std::vector<std::string> args{options.terratiles, options.command, rasters[i].string(), "-o", out.string(),
                                   "--tin-max-error", error_text, "--progress", "json", "-f"};
+    if (options.ranks > 0) {
+      args.insert(args.begin(), {"mpirun", "--allow-run-as-root", "--oversubscribe", "-np", std::to_string(options.ranks)});
+    }
     if (options.threads >= 0) {
       args.push_back("--threads");
       args.push_back(std::to_string(options.threads));
     }
     args.insert(args.end(), options.build_options.begin(), options.build_options.end());
-    std::printf("building %s ...\n", rasters[i].filename().c_str());
+    std::printf("%s %s ...\n", tin ? "triangulating" : "building", rasters[i].filename().c_str());
     std::fflush(stdout);
     Row row{options.sizes[i], measure(args), {}};
-    if (options.check) {
+    if (options.check && !tin) {
       std::printf("checking %s ...\n", out.filename().c_str());
       std::fflush(stdout);
       row.check = measure({options.terratiles, "check", out.string(), "--progress", "json"}, 5);
@@ -255,7 +277,9 @@ int runBench(int argc, char** argv) {
   }
   for (const Row& row : rows) {
     std::printf("  %s: %s\n", row.size.text().c_str(), row.build.summary.c_str());
-    if (options.check) std::printf("  %s check: %s\n", row.size.text().c_str(), row.check.summary.c_str());
+    if (options.check && options.command == "build") {
+      std::printf("  %s check: %s\n", row.size.text().c_str(), row.check.summary.c_str());
+    }
   }
   if (rows.size() >= 2) {
     const Row& small = rows.front();
