@@ -227,23 +227,23 @@ BlockTin readBlockTinFile(const std::string& path) {
 }
 
 std::vector<std::uint32_t> BlockVertexNumbering::number(
-    const BlockTin& block, const BlockGrid& grid,
-    const std::function<std::uint32_t(double, double, double)>& add) {
-  if (block.row != current_row_) {
+    std::size_t column, std::size_t block_row, const PixelWindow& window, const std::vector<GridPoint>& vertices,
+    const BlockGrid& grid, const std::function<std::uint32_t(double, double, double)>& add) {
+  if (block_row != current_row_) {
     // The borders above this block row are done with.
-    const std::int64_t first_row = grid.rows[block.row];
+    const std::int64_t first_row = grid.rows[block_row];
     std::erase_if(shared_, [&](const auto& entry) { return static_cast<std::int64_t>(entry.first >> 32) < first_row; });
-    current_row_ = block.row;
+    current_row_ = block_row;
   }
-  const std::int64_t c0 = grid.cols[block.column], c1 = grid.cols[block.column + 1];
-  const std::int64_t r0 = grid.rows[block.row], r1 = grid.rows[block.row + 1];
-  std::vector<std::uint32_t> numbers(block.mesh.vertices.size());
+  const std::int64_t c0 = grid.cols[column], c1 = grid.cols[column + 1];
+  const std::int64_t r0 = grid.rows[block_row], r1 = grid.rows[block_row + 1];
+  std::vector<std::uint32_t> numbers(vertices.size());
   for (std::size_t v = 0; v < numbers.size(); ++v) {
-    const GridPoint& p = block.mesh.vertices[v];
+    const GridPoint& p = vertices[v];
     // Mosaic pixel coordinates: exact (whole offsets plus window positions, which a coarser
     // level may have moved off the pixel centres inside the block; never on its outline).
-    const double col = static_cast<double>(block.window.col0) + p.col;
-    const double row = static_cast<double>(block.window.row0) + p.row;
+    const double col = static_cast<double>(window.col0) + p.col;
+    const double row = static_cast<double>(window.row0) + p.row;
     const bool on_border = ((col == static_cast<double>(c0) || col == static_cast<double>(c1)) && row == std::round(row)) ||
                            ((row == static_cast<double>(r0) || row == static_cast<double>(r1)) && col == std::round(col));
     if (!on_border) {

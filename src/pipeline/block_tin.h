@@ -108,11 +108,13 @@ BlockTin readBlockTinFile(const std::string& path);
 // come (the block row above and the block to the west).
 class BlockVertexNumbering {
  public:
-  // Per vertex of `block.mesh`: its number in the whole mesh. `add(mosaic_col, mosaic_row,
+  // Per vertex of a block's mesh: its number in the whole mesh. `add(mosaic_col, mosaic_row,
   // height)` is called for every new vertex, in order, and returns its number (positions in
   // mosaic pixels: whole on the outline and in a TIN, anywhere inside the block on a coarser
   // level whose collapses moved vertices).
-  std::vector<std::uint32_t> number(const BlockTin& block, const BlockGrid& grid,
+  // `vertices` are those of block (column, row), in its window's grid.
+  std::vector<std::uint32_t> number(std::size_t column, std::size_t row, const PixelWindow& window,
+                                    const std::vector<GridPoint>& vertices, const BlockGrid& grid,
                                     const std::function<std::uint32_t(double, double, double)>& add);
 
  private:

@@ -335,6 +335,20 @@ void printTinSummary(std::ostream& err, const std::string& output, const std::st
   err << line << std::flush;
 }
 
+// Appends one block's mesh (vertices in its window's grid) to a TIN file of the whole mosaic,
+// its border vertices stitched to those of the blocks before it (row-major order).
+void appendBlockMesh(TinFileStream& file, BlockVertexNumbering& numbering, const DemMosaic& mosaic,
+                     const BlockGrid& grid, std::size_t column, std::size_t row, const PixelWindow& window,
+                     const TinMesh& mesh) {
+  const std::vector<std::uint32_t> numbers =
+      numbering.number(column, row, window, mesh.vertices, grid, [&](double col, double mosaic_row, double height) {
+        return file.addVertex({mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
+                               mosaic.origin_y - (mosaic_row + 0.5) * mosaic.pixel_size, height});
+      });
+  const std::vector<std::uint32_t>& idx = mesh.triangle_indices;
+  for (std::size_t t = 0; t < idx.size(); t += 3) file.addTriangle(numbers[idx[t]], numbers[idx[t + 1]], numbers[idx[t + 2]]);
+}
+
 // Where one rank failed, every rank learns it here (Ranks::agree): the failing one throws
 // its own error, the others one that points at it.
 void meetRanks(const std::exception_ptr& failure) {
@@ -453,13 +467,7 @@ void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosai
   for (std::size_t j = 0; j < grid.rowCount(); ++j) {
     for (std::size_t i = 0; i < grid.columnCount(); ++i) {
       const BlockTin block = readBlockTinFile(blockPath(i, j));
-      const std::vector<std::uint32_t> numbers =
-          numbering.number(block, grid, [&](double col, double row, double height) {
-            return file.addVertex({mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
-                                   mosaic.origin_y - (row + 0.5) * mosaic.pixel_size, height});
-          });
-      const std::vector<std::uint32_t>& idx = block.mesh.triangle_indices;
-      for (std::size_t t = 0; t < idx.size(); t += 3) file.addTriangle(numbers[idx[t]], numbers[idx[t + 1]], numbers[idx[t + 2]]);
+      appendBlockMesh(file, numbering, mosaic, grid, i, j, block.window, block.mesh);
       errors.max_error_m = std::max(errors.max_error_m, block.errors.max_error_m);
       sum_squares += block.errors.rms_error_m * block.errors.rms_error_m * static_cast<double>(block.errors.measured_pixels);
       errors.measured_pixels += block.errors.measured_pixels;
@@ -620,25 +628,11 @@ void runBlockLevelsCommand(const LevelsCommandOptions& options, const DemMosaic&
   for (std::size_t j = 0; j < grid.rowCount(); ++j) {
     for (std::size_t i = 0; i < grid.columnCount(); ++i) {
       const BlockGround ground = readBlock(mosaic, grid, i, j, geoid ? &*geoid : nullptr);
-      BlockTin tin = buildBlockTin(ground, tin_options);
-      BlockTin shell;  // the block's place, for the numbering of every level
-      shell.column = tin.column;
-      shell.row = tin.row;
-      shell.window = tin.window;
-      const std::vector<Level> levels = buildBlockLevels(ground, std::move(tin), options.levels);
+      const std::vector<Level> levels = buildBlockLevels(ground, buildBlockTin(ground, tin_options), options.levels);
       for (std::size_t l = 0; l < level_count && !levels.empty(); ++l) {
         const Level& level = levels[std::min(l, levels.size() - 1)];
         LevelFile& file = files[l];
-        shell.mesh.vertices = level.mesh.vertices;
-        const std::vector<std::uint32_t> numbers =
-            file.numbering.number(shell, grid, [&](double col, double row, double height) {
-              return file.stream->addVertex({mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
-                                             mosaic.origin_y - (row + 0.5) * mosaic.pixel_size, height});
-            });
-        const std::vector<std::uint32_t>& idx = level.mesh.triangle_indices;
-        for (std::size_t t = 0; t < idx.size(); t += 3) {
-          file.stream->addTriangle(numbers[idx[t]], numbers[idx[t + 1]], numbers[idx[t + 2]]);
-        }
+        appendBlockMesh(*file.stream, file.numbering, mosaic, grid, i, j, ground.window, level.mesh);
         file.max_error_m = std::max(file.max_error_m, level.error.max_error_m);
         file.sum_squares += level.error.rms_error_m * level.error.rms_error_m *
                             static_cast<double>(level.error.measured_pixels);
