@@ -1,0 +1,288 @@
+#include "src/pipeline/tile_output.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <filesystem>
+#include <numbers>
+
+#include <nlohmann/json.hpp>
+
+#include "formats/geoid/read_geoid.h"
+#include "src/geo/place_on_globe.h"
+#include "tileset/implicit_tileset.h"
+
+namespace terratiles {
+namespace {
+
+// The bits of a snapped point for hashing and equality as doubles (-0 is 0).
+std::uint64_t pointHash(const EcefPoint& p) {
+  const auto bits = [](double value) { return std::bit_cast<std::uint64_t>(value + 0.0); };
+  std::uint64_t h = bits(p.x) * 0x9E3779B97F4A7C15ull;
+  h = (h ^ (h >> 29) ^ bits(p.y)) * 0xBF58476D1CE4E5B9ull;
+  h = (h ^ (h >> 31) ^ bits(p.z)) * 0x94D049BB133111EBull;
+  return h ^ (h >> 32);
+}
+
+}  // namespace
+
+// The smallest multiple of a micrometre at or above `metres` (at least one micrometre).
+double roundUpToMicrometre(double metres) {
+  double rounded = std::ceil(metres * 1e6) / 1e6;
+  while (rounded < metres) rounded = std::nextafter(rounded, std::numeric_limits<double>::infinity());
+  return std::max(rounded, 1e-6);
+}
+
+// Unit normals in ECEF of a level's vertices from the whole level mesh (area-weighted face
+// normals), so shading is continuous across tiles; an unused vertex gets the ellipsoid normal.
+// Summed and normalised in doubles, kept as floats.
+std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
+  const std::size_t n = mesh.vertices.size();
+  std::vector<EcefPoint> normals(n, EcefPoint{});
+  const auto& idx = mesh.triangle_indices;
+  for (std::size_t t = 0; t < idx.size(); t += 3) {
+    const EcefPoint& a = ecef[idx[t]];
+    const EcefPoint& b = ecef[idx[t + 1]];
+    const EcefPoint& c = ecef[idx[t + 2]];
+    const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+    const double vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
+    const EcefPoint face{uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};  // area-weighted
+    for (std::size_t k = 0; k < 3; ++k) {
+      EcefPoint& nrm = normals[idx[t + k]];
+      nrm.x += face.x;
+      nrm.y += face.y;
+      nrm.z += face.z;
+    }
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    EcefPoint& nrm = normals[i];
+    double length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+    if (length == 0) {  // an unused vertex: the direction from the Earth's centre
+      nrm = ecef[i];
+      length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+      if (length == 0) nrm = {0, 0, 1}, length = 1;
+    }
+    nrm.x /= length;
+    nrm.y /= length;
+    nrm.z /= length;
+  }
+  std::vector<FloatNormal> kept(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    kept[i] = {static_cast<float>(normals[i].x), static_cast<float>(normals[i].y), static_cast<float>(normals[i].z)};
+  }
+  return kept;
+}
+
+// Vertices take their tile index in order of first appearance in the tile's triangles; one
+// whose snapped point equals an earlier one's is welded to it (the first seen keeps its place
+// and the others take it; found by hashing, which gives what a stable sort by point did).
+DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
+                          std::span<const FloatNormal> normals, const DemOnGlobe& globe, ContentScratch& scratch) {
+  DrawnContent out;
+  const std::size_t triangles = tile.triangleCount();
+  std::vector<std::uint32_t>& local_of = scratch.local_of;
+  if (local_of.size() < mesh.vertices.size()) local_of.resize(mesh.vertices.size(), kNotInTile);
+  // The level's vertices in order of first appearance (local_of: their place in it).
+  std::vector<std::uint32_t>& seen = scratch.seen;
+  seen.clear();
+  for (std::size_t c = 0; c < 3 * triangles; ++c) {
+    const std::uint32_t v = tile.corner(mesh, c / 3, c % 3);
+    if (local_of[v] != kNotInTile) continue;
+    local_of[v] = static_cast<std::uint32_t>(seen.size());
+    seen.push_back(v);
+  }
+  std::size_t capacity = 16;
+  while (capacity < 2 * seen.size()) capacity *= 2;
+  std::vector<std::uint32_t>& slots = scratch.slots;
+  slots.assign(capacity, kNotInTile);
+  std::vector<std::uint32_t>& tile_vertex = scratch.tile_vertex;
+  tile_vertex.resize(seen.size());
+  out.positions.reserve(seen.size());
+  out.normals.reserve(seen.size());
+  out.grid.reserve(seen.size());
+  for (std::size_t i = 0; i < seen.size(); ++i) {
+    const std::uint32_t v = seen[i];
+    const EcefPoint& p = snapped[v];
+    std::size_t slot = pointHash(p) & (capacity - 1);
+    bool welded = false;
+    for (; slots[slot] != kNotInTile; slot = (slot + 1) & (capacity - 1)) {
+      const EcefPoint& q = snapped[seen[slots[slot]]];
+      if (p.x == q.x && p.y == q.y && p.z == q.z) {
+        tile_vertex[i] = tile_vertex[slots[slot]];  // seen earlier
+        welded = true;
+        break;
+      }
+    }
+    if (welded) continue;
+    slots[slot] = static_cast<std::uint32_t>(i);
+    const GridPoint& g = mesh.vertices[v];
+    tile_vertex[i] = static_cast<std::uint32_t>(out.positions.size());
+    out.positions.push_back(p);
+    out.normals.push_back(normals[v]);
+    const bool at_pole = g.row == std::round(g.row) && g.row >= 0 && g.row < globe.dem().height &&
+                         globe.poleRow(static_cast<std::int32_t>(g.row));
+    out.grid.push_back({g.col, g.row, at_pole});
+  }
+  out.triangle_indices.reserve(3 * triangles);
+  for (std::size_t t = 0; t < triangles; ++t) {
+    const std::uint32_t a = tile_vertex[local_of[tile.corner(mesh, t, 0)]],
+                        b = tile_vertex[local_of[tile.corner(mesh, t, 1)]],
+                        c = tile_vertex[local_of[tile.corner(mesh, t, 2)]];
+    if (a != b && b != c && c != a) out.triangle_indices.insert(out.triangle_indices.end(), {a, b, c});
+  }
+  for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
+  return out;
+}
+
+// One tile's GLB: its vertices relative to an origin on the quantisation grid, in the glTF
+// y-up frame (glTF (x, y, z) = ECEF (X, Z, -Y); 3D Tiles rotates y-up back to z-up). Every
+// position is on the grid before it is made relative, so the float offsets are exact and
+// Draco gives them back bit for bit: a vertex two tiles share decodes to one position in both.
+std::vector<std::uint8_t> encodeContent(const DrawnContent& content, const GlbOptions& glb, int* position_bits) {
+  GlbMesh mesh;
+  mesh.triangle_indices = content.triangle_indices;
+  EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (const EcefPoint& p : content.positions) {
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  const double step = glb.position_step_m;
+  auto snap = [step](double value) { return snapToStep(value, step); };
+  const EcefPoint origin{snap((lo.x + hi.x) / 2), snap((lo.y + hi.y) / 2), snap((lo.z + hi.z) / 2)};
+  mesh.translation = {origin.x, origin.z, -origin.y};
+  mesh.positions.reserve(content.positions.size() * 3);
+  mesh.normals.reserve(content.positions.size() * 3);
+  for (std::size_t v = 0; v < content.positions.size(); ++v) {
+    const EcefPoint& p = content.positions[v];
+    const FloatNormal& n = content.normals[v];
+    mesh.positions.insert(mesh.positions.end(), {static_cast<float>(p.x - origin.x), static_cast<float>(p.z - origin.z),
+                                                 static_cast<float>(-(p.y - origin.y))});
+    mesh.normals.insert(mesh.normals.end(), {n[0], n[2], -n[1]});
+  }
+  EncodedGlb encoded = encodeGlb(mesh, glb);
+  *position_bits = encoded.position_bits;
+  return std::move(encoded.bytes);
+}
+
+// Attaches every node under its parent in `nodes`, finest zoom first, creating content-less
+// ancestors where needed, until one node (the common ancestor) is left: the root.
+TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes) {
+  while (nodes.size() > 1) {
+    int zoom = 0;
+    for (const auto& [key, node] : nodes) zoom = std::max(zoom, std::get<0>(key));
+    if (zoom == 0) {
+      // The geographic scheme's two zoom-0 tiles (data on both sides of the prime meridian):
+      // a content-less root above them (zoom -1 marks it; it has no file).
+      TileNode root;
+      root.key = {-1, 0, 0};
+      for (auto& [key, node] : nodes) root.children.push_back(std::move(node));
+      nodes.clear();
+      return root;
+    }
+    std::vector<std::tuple<int, int, int>> at_zoom;
+    for (const auto& [key, node] : nodes) {
+      if (std::get<0>(key) == zoom) at_zoom.push_back(key);
+    }
+    for (const auto& key : at_zoom) {
+      TileNode child = std::move(nodes.at(key));
+      nodes.erase(key);
+      const TileKey parent_key = child.key.parent();
+      TileNode& parent = nodes[{parent_key.zoom, parent_key.y, parent_key.x}];
+      parent.key = parent_key;
+      parent.children.push_back(std::move(child));
+    }
+  }
+  TileNode root = std::move(nodes.begin()->second);
+  return root;
+}
+
+void writeTilesetOutput(std::map<std::tuple<int, int, int>, TileNode> nodes, const BuildOptions& options,
+                        const std::string& crs_name, bool orthometric, double widest_step_m, BuildSummary& summary,
+                        OutputDirectory& output, Progress& progress) {
+  constexpr double kDegToRad = std::numbers::pi / 180.0;
+  progress.beginStage("writing the tileset", 0);
+  Tileset tileset;
+  tileset.generator = summary.generator;
+  tileset.root = buildTree(nodes);
+  finalizeTree(tileset.root);
+  // The error of drawing nothing at all: at least the data's size, the larger of the
+  // footprint's diagonal (chord between the root region's corners) and the relief. A value
+  // as small as the relief alone would hide flat terrain from any distance (CesiumJS does
+  // not draw a root whose error, seen through tileset.geometricError, is below the SSE).
+  {
+    const Region& r = tileset.root.region;
+    const std::vector<GeodeticPoint> corners{
+        {r.west_rad / kDegToRad, r.south_rad / kDegToRad, r.min_height_m},
+        {r.east_rad / kDegToRad, r.north_rad / kDegToRad, r.min_height_m}};
+    std::vector<EcefPoint> ends(2);
+    geodeticToEcef(corners, ends);
+    const double diagonal_m =
+        std::hypot(ends[1].x - ends[0].x, ends[1].y - ends[0].y, ends[1].z - ends[0].z);
+    tileset.geometric_error_m = std::max(
+        {tileset.root.geometric_error_m, diagonal_m, r.max_height_m - r.min_height_m});
+  }
+  // A tile without content (a common ancestor above the coarsest zoom's tiles) draws nothing:
+  // its error is that of drawing nothing, so a viewer always refines it.
+  {
+    std::vector<TileNode*> open{&tileset.root};
+    while (!open.empty()) {
+      TileNode* node = open.back();
+      open.pop_back();
+      if (node->content_uri.empty()) node->geometric_error_m = tileset.geometric_error_m;
+      for (TileNode& child : node->children) open.push_back(&child);
+    }
+  }
+  // Record per zoom the largest geometricError written (after finalizeTree raised them).
+  std::vector<const TileNode*> stack{&tileset.root};
+  while (!stack.empty()) {
+    const TileNode* node = stack.back();
+    stack.pop_back();
+    for (ZoomSummary& z : summary.zooms) {
+      if (z.zoom == node->key.zoom && !node->content_uri.empty()) {
+        z.geometric_error_m = std::max(z.geometric_error_m, node->geometric_error_m);
+      }
+    }
+    for (const TileNode& child : node->children) stack.push_back(&child);
+  }
+
+  // What `terratiles check` needs to find the source again (not referenced by tileset.json).
+  {
+    nlohmann::json facts;
+    facts["generator"] = summary.generator;
+    std::vector<std::string> inputs;
+    for (const std::string& input : options.inputs) inputs.push_back(std::filesystem::absolute(input).lexically_normal().string());
+    facts["inputs"] = inputs;
+    facts["crs"] = crs_name;
+    facts["lod"] = options.lod == LodMethod::Grid ? "grid" : "clusters";
+    facts["scheme"] = options.lod == LodMethod::Grid ? "local pixels" : std::string(tileSchemeName(options.scheme));
+    facts["assign"] = std::string(assignmentName(options.assignment));
+    facts["tin_max_error_m"] = options.tin_max_error_m;
+    facts["heights"] = orthometric ? "orthometric" : "ellipsoidal";
+    facts["geoid"] = orthometric ? std::filesystem::absolute(options.geoid_path.empty() ? kDefaultGeoidPath
+                                                                                 : options.geoid_path).string()
+                           : std::string();
+    facts["position_step_m"] = widest_step_m;  // the widest any zoom used
+    nlohmann::json steps = nlohmann::json::object();
+    for (const ZoomSummary& z : summary.zooms) steps[std::to_string(z.zoom)] = z.position_step_m;
+    facts["position_step_m_by_zoom"] = steps;
+    facts["tiling"] = options.implicit_tiling ? "implicit" : "explicit";
+    // Implicit output: the same tree as an explicit tileset, for `terratiles check`.
+    if (options.implicit_tiling) facts["explicit_tileset"] = nlohmann::json::parse(tilesetToJson(tileset));
+    summary.bytes += output.writeFile("build.json", facts.dump(2) + "\n");
+  }
+  // tileset.json last, then the whole directory moves into place.
+  if (options.implicit_tiling) {
+    for (const ImplicitFile& file : writeImplicitTileset(tileset, options.subtree_levels)) {
+      summary.bytes += output.writeFile(file.path, file.bytes);
+    }
+  } else {
+    // Deep trees: external tilesets, then tileset.json (the last file written).
+    std::vector<TilesetFile> files = tilesetFiles(tileset, options.tileset_levels);
+    for (std::size_t f = files.size(); f-- > 0;) summary.bytes += output.writeFile(files[f].path, files[f].text);
+    if (files.size() > 1) progress.note("tileset: " + std::to_string(files.size() - 1) + " external tilesets below tileset.json");
+  }
+  progress.endStage();
+
+}
+
+}  // namespace terratiles
