@@ -20,6 +20,31 @@ namespace {
 
 OutputDirectory::OutputDirectory(const fs::path& target, bool force, const std::string& marker)
     : target_(target) {
+  const fs::path absolute = checkTarget(force, marker);
+  const fs::path parent = absolute.parent_path();
+  std::error_code ec;
+  staging_ = parent / ("." + absolute.filename().string() + ".terratiles-partial-" + std::to_string(::getpid()));
+  fs::remove_all(staging_, ec);
+  fs::create_directory(staging_, ec);
+  if (ec) {
+    outputError(target_, "cannot write in " + parent.string() + " (" + ec.message() + ")",
+                "check the path and permissions");
+  }
+}
+
+OutputDirectory::OutputDirectory(const fs::path& target, bool force, const KeptStaging& kept_staging,
+                                 const std::string& marker)
+    : target_(target), staging_(kept_staging.path), kept_(true) {
+  checkTarget(force, marker);
+  std::error_code ec;
+  fs::create_directories(staging_, ec);
+  if (ec) {
+    outputError(staging_, "cannot create the staging directory (" + ec.message() + ")",
+                "check the path and permissions");
+  }
+}
+
+fs::path OutputDirectory::checkTarget(bool force, const std::string& marker) {
   std::error_code ec;
   if (target_.empty()) throw Error(ErrorCode::Usage, "the output directory name is empty");
   const fs::file_status status = fs::status(target_, ec);
@@ -49,18 +74,11 @@ OutputDirectory::OutputDirectory(const fs::path& target, bool force, const std::
                              ec.message() + ")",
                 "check the path and permissions");
   }
-  staging_ = parent / ("." + absolute.filename().string() + ".terratiles-partial-" +
-                       std::to_string(::getpid()));
-  fs::remove_all(staging_, ec);
-  fs::create_directory(staging_, ec);
-  if (ec) {
-    outputError(target_, "cannot write in " + parent.string() + " (" + ec.message() + ")",
-                "check the path and permissions");
-  }
+  return absolute;
 }
 
 OutputDirectory::~OutputDirectory() {
-  if (committed_) return;
+  if (committed_ || kept_) return;
   std::error_code ec;
   fs::remove_all(staging_, ec);
 }

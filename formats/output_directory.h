@@ -20,7 +20,15 @@ class OutputDirectory {
   // marker: the file that identifies a previous output of the same command, which force may
   // replace (tileset.json for build, levels.json for levels).
   OutputDirectory(const std::filesystem::path& target, bool force, const std::string& marker = "tileset.json");
-  ~OutputDirectory();  // removes the staging directory unless committed
+  // The build in blocks: the staging directory is `kept_staging` (created when missing, what it
+  // holds kept), which another rank or a resumed run finds again; it is not removed when the
+  // output is not committed.
+  struct KeptStaging {
+    std::filesystem::path path;
+  };
+  OutputDirectory(const std::filesystem::path& target, bool force, const KeptStaging& kept_staging,
+                  const std::string& marker = "tileset.json");
+  ~OutputDirectory();  // removes the staging directory unless committed or kept
   OutputDirectory(const OutputDirectory&) = delete;
   OutputDirectory& operator=(const OutputDirectory&) = delete;
 
@@ -36,8 +44,12 @@ class OutputDirectory {
   const std::filesystem::path& staging() const { return staging_; }
 
  private:
+  // Refuses a target that is no output to replace; returns its absolute path (its parent created).
+  std::filesystem::path checkTarget(bool force, const std::string& marker);
+
   std::filesystem::path target_;
   std::filesystem::path staging_;
+  bool kept_ = false;
   bool committed_ = false;
 };
 

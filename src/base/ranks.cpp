@@ -1,10 +1,13 @@
 #include "src/base/ranks.h"
 
 #include <cstdlib>
+#include <string>
 
 #if defined(TERRATILES_WITH_MPI)
 #include <mpi.h>
 #endif
+
+#include "src/base/error.h"
 
 namespace terratiles {
 namespace {
@@ -58,6 +61,12 @@ int Ranks::agree(int my_exit_code) {
   }
 #endif
   return my_exit_code;
+}
+
+void Ranks::meet(const std::exception_ptr& failure) {
+  if (agree(failure ? 1 : 0) == 0) return;
+  if (failure) std::rethrow_exception(failure);
+  throw Error(ErrorCode::Internal, "rank " + std::to_string(rank()) + " stops: another rank failed (its error is above)");
 }
 
 }  // namespace terratiles

@@ -8,6 +8,8 @@
 // Work spread over ranks is split by a rule every rank computes alike (block b on rank
 // b mod N), and the ranks meet only where results come together (agree()).
 
+#include <exception>
+
 namespace terratiles {
 
 class Ranks {
@@ -21,6 +23,9 @@ class Ranks {
   // Every rank passes its own exit code (0: success) and gets the largest of them: where one
   // rank failed, all learn it at this meeting point instead of waiting for it for ever.
   static int agree(int my_exit_code);
+  // agree() on whether this rank failed (`failure` is its exception, or null): rethrows it
+  // here, or throws Error(Internal) "another rank failed" on the ranks that did not.
+  static void meet(const std::exception_ptr& failure);
 };
 
 }  // namespace terratiles

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <iterator>
 
+#include "src/base/block_record.h"
 #include "src/base/error.h"
 #include "src/geo/dem_on_globe.h"
 #include "src/tin/build_tin.h"
@@ -120,87 +121,32 @@ namespace {
 
 constexpr char kBlockMagic[8] = {'T', 'T', 'B', 'L', 'O', 'C', 'K', '1'};
 
-template <typename T>
-void put(std::string& out, const T& value) {
-  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-
-template <typename T>
-void putArray(std::string& out, const std::vector<T>& values) {
-  put(out, static_cast<std::uint64_t>(values.size()));
-  out.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T));
-}
-
-// Reads what put wrote, refusing to run past the end.
-struct Reader {
-  const std::string& path;
-  const std::string& bytes;
-  std::size_t at = 0;
-  template <typename T>
-  T get() {
-    need(sizeof(T));
-    T value;
-    std::memcpy(&value, bytes.data() + at, sizeof(T));
-    at += sizeof(T);
-    return value;
-  }
-  template <typename T>
-  std::vector<T> getArray() {
-    const auto count = get<std::uint64_t>();
-    if (count > (bytes.size() - at) / sizeof(T)) damaged();
-    std::vector<T> values(count);
-    std::memcpy(values.data(), bytes.data() + at, count * sizeof(T));
-    at += count * sizeof(T);
-    return values;
-  }
-  void need(std::size_t size) const {
-    if (bytes.size() - at < size) damaged();
-  }
-  [[noreturn]] void damaged() const {
-    throw Error(ErrorCode::Input, path + ": not a whole terratiles block file (damaged, or from another version); "
-                                         "expected one this version wrote; run again without --resume");
-  }
-};
-
 }  // namespace
 
 void writeBlockTinFile(const BlockTin& block, const std::string& path) {
-  std::string out(kBlockMagic, sizeof kBlockMagic);
-  put(out, static_cast<std::uint64_t>(block.column));
-  put(out, static_cast<std::uint64_t>(block.row));
-  put(out, block.window.col0);
-  put(out, block.window.row0);
-  put(out, block.window.width);
-  put(out, block.window.height);
-  putArray(out, block.mesh.vertices);
-  putArray(out, block.mesh.triangle_indices);
+  RecordWriter out;
+  out.bytes.assign(kBlockMagic, sizeof kBlockMagic);
+  out.put(static_cast<std::uint64_t>(block.column));
+  out.put(static_cast<std::uint64_t>(block.row));
+  out.put(block.window.col0);
+  out.put(block.window.row0);
+  out.put(block.window.width);
+  out.put(block.window.height);
+  out.putArray(block.mesh.vertices);
+  out.putArray(block.mesh.triangle_indices);
   const TinErrorStatistics& e = block.errors;
-  for (const double value : {e.max_error_m, e.rms_error_m}) put(out, value);
+  for (const double value : {e.max_error_m, e.rms_error_m}) out.put(value);
   for (const std::size_t value : {e.measured_pixels, e.uncovered_valid_pixels, e.covered_nodata_pixels,
                                   e.degenerate_triangles, block.outline_repairs, block.outline_misses}) {
-    put(out, static_cast<std::uint64_t>(value));
+    out.put(static_cast<std::uint64_t>(value));
   }
-  const std::string temporary = path + ".tmp";
-  std::FILE* file = std::fopen(temporary.c_str(), "wb");
-  const bool written = file && std::fwrite(out.data(), 1, out.size(), file) == out.size();
-  const bool closed = file && std::fclose(file) == 0;
-  std::error_code ec;
-  if (!written || !closed) {
-    std::filesystem::remove(temporary, ec);
-    throw Error(ErrorCode::Output, temporary + ": cannot write a block file (" + std::strerror(errno) +
-                                       "); check the free space and permissions");
-  }
-  std::filesystem::rename(temporary, path, ec);
-  if (ec) throw Error(ErrorCode::Output, path + ": cannot rename the block file into place (" + ec.message() + ")");
+  writeRecordFile(path, out.bytes);
 }
 
 BlockTin readBlockTinFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  Reader reader{path, bytes};
-  reader.need(sizeof kBlockMagic);
-  if (std::memcmp(bytes.data(), kBlockMagic, sizeof kBlockMagic) != 0) reader.damaged();
-  reader.at = sizeof kBlockMagic;
+  const std::string bytes = readRecordFile(path);
+  RecordReader reader{path, bytes};
+  reader.expectMagic(kBlockMagic);
   BlockTin block;
   block.column = reader.get<std::uint64_t>();
   block.row = reader.get<std::uint64_t>();
@@ -219,7 +165,8 @@ BlockTin readBlockTinFile(const std::string& path) {
   e.degenerate_triangles = reader.get<std::uint64_t>();
   block.outline_repairs = reader.get<std::uint64_t>();
   block.outline_misses = reader.get<std::uint64_t>();
-  if (reader.at != bytes.size() || block.mesh.triangle_indices.size() % 3 != 0) reader.damaged();
+  reader.expectEnd();
+  if (block.mesh.triangle_indices.size() % 3 != 0) reader.damaged();
   for (const std::uint32_t index : block.mesh.triangle_indices) {
     if (index >= block.mesh.vertices.size()) reader.damaged();
   }

@@ -36,6 +36,7 @@
 #include "src/geo/place_on_globe.h"
 #include "formats/vector/read_break_lines.h"
 #include "src/lod/build_levels.h"
+#include "src/pipeline/block_build.h"
 #include "src/pipeline/build_report.h"
 #include "src/pipeline/report_html.h"
 #include "src/pipeline/report_maps.h"
@@ -43,6 +44,7 @@
 #include "src/pipeline/drawn_tiles.h"
 #include "src/pipeline/tile_output.h"
 #include "src/base/largest_first.h"
+#include "src/base/ranks.h"
 #include "src/simplify/simplify_clusters.h"
 #include "src/tin/measure_tin.h"
 #include "src/geo/dem_on_globe.h"
@@ -142,42 +144,6 @@ struct ZoomContent {
   std::vector<PyramidTile> tiles;
 };
 
-// Per vertex of a zoom's mesh: whether it is on the outline of some tile of the zoom (an
-// edge of one of the tile's triangles that no other of its triangles has). Tiles in parallel.
-std::vector<std::uint8_t> outlineVertices(const ZoomContent& zoom) {
-  std::vector<std::uint8_t> outline(zoom.mesh->vertices.size(), 0);
-  struct Scratch {
-    ContentScratch numbering;  // local_of: the tile's own vertex numbers
-    std::vector<std::uint32_t> local;
-    OutlineScratch outline;
-    std::vector<std::array<std::uint32_t, 2>> edges;
-  };
-  tbb::enumerable_thread_specific<Scratch> scratch;
-  tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
-    Scratch& s = scratch.local();
-    const PyramidTile& tile = zoom.tiles[i];
-    std::vector<std::uint32_t>& local_of = s.numbering.local_of;
-    std::vector<std::uint32_t>& seen = s.numbering.seen;
-    if (local_of.size() < outline.size()) local_of.resize(outline.size(), kNotInTile);
-    seen.clear();
-    s.local.resize(3 * tile.triangleCount());
-    for (std::size_t k = 0; k < s.local.size(); ++k) {
-      const std::uint32_t v = tile.corner(*zoom.mesh, k / 3, k % 3);
-      if (local_of[v] == kNotInTile) {
-        local_of[v] = static_cast<std::uint32_t>(seen.size());
-        seen.push_back(v);
-      }
-      s.local[k] = local_of[v];
-    }
-    outlineEdges(s.local, seen.size(), s.outline, s.edges);
-    for (const auto& edge : s.edges) {
-      for (const std::uint32_t end : edge) std::atomic_ref<std::uint8_t>(outline[seen[end]]).store(1, std::memory_order_relaxed);
-    }
-    for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
-  });
-  return outline;
-}
-
 }  // namespace
 
 ConstrainedTin buildFinestTin(const DemGrid& dem, const DemOnGlobe* globe, double max_error_m,
@@ -211,9 +177,19 @@ ConstrainedTin buildFinestTin(const DemGrid& dem, const DemOnGlobe* globe, doubl
 BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   const auto start = std::chrono::steady_clock::now();
   validateOptions(options);
+  const DemMosaic mosaic = scanDemMosaic(options.inputs, &progress);
+  if (const std::int32_t block_pixels = buildBlockPixels(options, mosaic); block_pixels > 0) {
+    return runBlockedPipeline(options, mosaic, block_pixels, progress);
+  }
+  if (options.resume) {
+    throw Error(ErrorCode::Usage, "--resume continues a build in blocks; this build is not in blocks (the mosaic has " +
+                                      std::to_string(mosaic.width) + " x " + std::to_string(mosaic.height) +
+                                      " pixels; pass --block-pixels N to build in blocks)");
+  }
+  if (Ranks::rank() != 0) return {};  // under mpirun, a whole build is rank 0's alone
   OutputDirectory output(options.output_dir, options.force);
 
-  const DemGrid dem = readDem(options.inputs, "reading DEM", progress);
+  const DemGrid dem = readDem(mosaic, "reading DEM", progress);
   const DemStatistics stats = computeStatistics(dem);
   const CrsToWgs84 to_wgs84(dem.crs_wkt);
   std::optional<GeoidGrid> geoid;
@@ -364,7 +340,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   std::vector<std::vector<std::uint8_t>> outline(zoom_count);
   std::vector<double> widest_m(zoom_count);
   tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
-    outline[k] = outlineVertices(zooms[k]);
+    outline[k] = tileOutlineVertices(*zooms[k].mesh, zooms[k].tiles);
     widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, placedVertices(zooms[k]));
   });
   // The shared quantisation grid: --position-step, or the step at which the finest zoom's

@@ -71,7 +71,13 @@ struct BuildOptions {
   double position_step_m = 1.0 / 128;
   std::int32_t draco_position_bits = 0;
   std::int32_t draco_normal_bits = 10;
-  std::int32_t draco_speed = 3;  // measured: 15-17 % smaller than 5 and within 3 % of 0, decoding 1.4x faster than 0
+  std::int32_t draco_speed = 3;
+  // clusters: build in blocks of at most this many pixels a side (block_build.h), each a tile of
+  // one zoom; 0: blocks of kBuildBlockPixels when the mosaic has more than
+  // kBuildBlocksAbovePixels pixels, else the whole mosaic at once.
+  std::int32_t block_pixels = 0;
+  // Blocks: continue an interrupted build from the block files it left in OUTDIR.blocks/.
+  bool resume = false;  // measured: 15-17 % smaller than 5 and within 3 % of 0, decoding 1.4x faster than 0
 };
 
 struct ZoomSummary {
@@ -108,6 +114,7 @@ struct BuildSummary {
   std::string placement;  // the CRS -> WGS84 path, e.g. "EPSG:2056 -> WGS84 by the rigorous ..."
   std::vector<std::string> warnings;  // things the user should know (e.g. a missing grid)
   std::string geoid;  // which geoid turned heights ellipsoidal, or "none (ellipsoidal input)"
+  std::string blocks;  // a build in blocks: how many, of which zoom, how many resumed; else empty
   std::vector<ZoomSummary> zooms;
   std::size_t tiles = 0;
   std::size_t triangles = 0;

@@ -1,6 +1,10 @@
 #include "src/pipeline/tile_output.h"
 
 #include <algorithm>
+#include <atomic>
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <bit>
 #include <cmath>
 #include <filesystem>
@@ -164,8 +168,42 @@ std::vector<std::uint8_t> encodeContent(const DrawnContent& content, const GlbOp
   return std::move(encoded.bytes);
 }
 
-// Attaches every node under its parent in `nodes`, finest zoom first, creating content-less
-// ancestors where needed, until one node (the common ancestor) is left: the root.
+// Per vertex of a zoom's mesh: whether it is on the outline of some tile of the zoom (an
+// edge of one of the tile's triangles that no other of its triangles has). Tiles in parallel.
+std::vector<std::uint8_t> tileOutlineVertices(const TinMesh& mesh, const std::vector<PyramidTile>& tiles) {
+  std::vector<std::uint8_t> outline(mesh.vertices.size(), 0);
+  struct Scratch {
+    ContentScratch numbering;  // local_of: the tile's own vertex numbers
+    std::vector<std::uint32_t> local;
+    OutlineScratch outline;
+    std::vector<std::array<std::uint32_t, 2>> edges;
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch;
+  tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
+    Scratch& s = scratch.local();
+    const PyramidTile& tile = tiles[i];
+    std::vector<std::uint32_t>& local_of = s.numbering.local_of;
+    std::vector<std::uint32_t>& seen = s.numbering.seen;
+    if (local_of.size() < outline.size()) local_of.resize(outline.size(), kNotInTile);
+    seen.clear();
+    s.local.resize(3 * tile.triangleCount());
+    for (std::size_t k = 0; k < s.local.size(); ++k) {
+      const std::uint32_t v = tile.corner(mesh, k / 3, k % 3);
+      if (local_of[v] == kNotInTile) {
+        local_of[v] = static_cast<std::uint32_t>(seen.size());
+        seen.push_back(v);
+      }
+      s.local[k] = local_of[v];
+    }
+    outlineEdges(s.local, seen.size(), s.outline, s.edges);
+    for (const auto& edge : s.edges) {
+      for (const std::uint32_t end : edge) std::atomic_ref<std::uint8_t>(outline[seen[end]]).store(1, std::memory_order_relaxed);
+    }
+    for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
+  });
+  return outline;
+}
+
 TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes) {
   while (nodes.size() > 1) {
     int zoom = 0;

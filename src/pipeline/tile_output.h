@@ -78,6 +78,10 @@ struct EncodedTile {
 // Draco gives them back bit for bit: a vertex two tiles share decodes to one position in both.
 std::vector<std::uint8_t> encodeContent(const DrawnContent& content, const GlbOptions& glb, int* position_bits);
 
+// Per vertex of a zoom's mesh: whether it is on the outline of some of its tiles (an edge of
+// one of the tile's triangles that no other of its triangles has). Tiles in parallel.
+std::vector<std::uint8_t> tileOutlineVertices(const TinMesh& mesh, const std::vector<PyramidTile>& tiles);
+
 // Attaches every node under its parent in `nodes`, finest zoom first, creating content-less
 // ancestors where needed, until one node (the common ancestor) is left: the root.
 TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes);

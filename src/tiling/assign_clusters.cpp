@@ -42,10 +42,11 @@ struct TileFrame::ThreadTransforms {
   }
 };
 
-TileFrame::TileFrame(TileSchemeKind kind, const DemGrid& dem) : kind_(kind), dem_(dem) {
+TileFrame::TileFrame(TileSchemeKind kind, const DemGrid& dem, const TileBounds* local_extent) : kind_(kind), dem_(dem) {
   if (kind == TileSchemeKind::Local) {
-    const TileBounds extent{dem.origin_x, dem.origin_y - dem.height * dem.pixel_size_y,
-                            dem.origin_x + dem.width * dem.pixel_size_x, dem.origin_y};
+    const TileBounds extent = local_extent ? *local_extent
+                                           : TileBounds{dem.origin_x, dem.origin_y - dem.height * dem.pixel_size_y,
+                                                        dem.origin_x + dem.width * dem.pixel_size_x, dem.origin_y};
     local_ = makeLocalTileScheme(extent);
   } else {
     to_wgs84_ = std::make_unique<CrsToWgs84>(dem.crs_wkt);
@@ -82,7 +83,64 @@ TileFrame::TileFrame(TileSchemeKind kind, const DemGrid& dem) : kind_(kind), dem
 
 TileFrame::~TileFrame() = default;
 
+void TileFrame::keepInside(TileKey key) {
+  inside_ = kind_ == TileSchemeKind::Local ? tileBounds(local_, key) : tileBoundsDeg(kind_, key);
+  // A billionth of the tile inside every edge: the scheme's point-to-tile then gives `key` for
+  // any point kept inside, whatever its own rounding (webmercator decides in metres).
+  const double margin_x = (inside_.east - inside_.west) * 1e-9, margin_y = (inside_.north - inside_.south) * 1e-9;
+  inside_ = {inside_.west + margin_x, inside_.south + margin_y, inside_.east - margin_x, inside_.north - margin_y};
+  keep_inside_ = true;
+}
+
+void TileFrame::followBlocks(std::vector<double> col_lines, std::vector<double> col_values,
+                             std::vector<double> row_lines, std::vector<double> row_values) {
+  TERRATILES_ASSERT(col_lines.size() >= 2 && col_lines.size() == col_values.size());
+  TERRATILES_ASSERT(row_lines.size() >= 2 && row_lines.size() == row_values.size());
+  col_lines_ = std::move(col_lines);
+  col_values_ = std::move(col_values);
+  row_lines_ = std::move(row_lines);
+  row_values_ = std::move(row_values);
+  follow_blocks_ = true;
+}
+
+namespace {
+
+// Linear between the lines around `at` (the first or last two beyond them); a line's own value
+// exactly on it.
+double betweenLines(const std::vector<double>& lines, const std::vector<double>& values, double at) {
+  const auto above = std::upper_bound(lines.begin(), lines.end(), at);
+  const auto i = static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(above - lines.begin() - 1, 0,
+                                                                     static_cast<std::ptrdiff_t>(lines.size()) - 2));
+  if (at == lines[i]) return values[i];
+  if (at == lines[i + 1]) return values[i + 1];
+  return values[i] + (at - lines[i]) * (values[i + 1] - values[i]) / (lines[i + 1] - lines[i]);
+}
+
+}  // namespace
+
 std::vector<std::array<double, 2>> TileFrame::toScheme(std::span<const GridPoint> points) const {
+  std::vector<std::array<double, 2>> out;
+  if (follow_blocks_) {
+    out.resize(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const double col = static_cast<double>(dem_.col_offset) + points[i].col;
+      const double row = static_cast<double>(dem_.row_offset) + points[i].row;
+      const double y = betweenLines(row_lines_, row_values_, row);
+      out[i] = {betweenLines(col_lines_, col_values_, col), kind_ == TileSchemeKind::Local ? y : insideLatitude(y)};
+    }
+  } else {
+    out = unclampedScheme(points);
+  }
+  if (keep_inside_) {
+    for (auto& p : out) {
+      // (A web scheme's longitude is wrapped into [-180, 180) as the tile's edges are.)
+      p = {std::clamp(p[0], inside_.west, inside_.east), std::clamp(p[1], inside_.south, inside_.north)};
+    }
+  }
+  return out;
+}
+
+std::vector<std::array<double, 2>> TileFrame::unclampedScheme(std::span<const GridPoint> points) const {
   std::vector<std::array<double, 2>> out(points.size());
   if (kind_ == TileSchemeKind::Local) {
     for (std::size_t i = 0; i < points.size(); ++i) {
@@ -182,17 +240,6 @@ std::vector<TileKey> TileFrame::tilesIntersecting(const TileBounds& box, std::in
 }
 
 namespace {
-
-TileBounds boundsOf(const std::vector<std::array<double, 2>>& points) {
-  TileBounds box{1e300, 1e300, -1e300, -1e300};
-  for (const auto& p : points) {
-    box.west = std::min(box.west, p[0]);
-    box.east = std::max(box.east, p[0]);
-    box.south = std::min(box.south, p[1]);
-    box.north = std::max(box.north, p[1]);
-  }
-  return box;
-}
 
 // The tiles each face's bounding box (in scheme coordinates) shares area with, as CSR.
 struct FaceTiles {
@@ -355,12 +402,28 @@ std::function<FacePartition(const TinMesh&, std::size_t, const FacePartition&)> 
   };
 }
 
+TileBounds schemeBounds(const std::vector<std::array<double, 2>>& points) {
+  TileBounds box{1e300, 1e300, -1e300, -1e300};
+  for (const auto& p : points) {
+    box.west = std::min(box.west, p[0]);
+    box.east = std::max(box.east, p[0]);
+    box.south = std::min(box.south, p[1]);
+    box.north = std::max(box.north, p[1]);
+  }
+  return box;
+}
+
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
                    std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
+  return planZooms(frame, schemeBounds(frame.toScheme(finest.vertices)), finest.triangleCount(), tile_triangles,
+                   forced_max_zoom, clusters_per_tile);
+}
+
+ZoomPlan planZooms(const TileFrame& frame, const TileBounds& box, std::size_t finest_triangles,
+                   std::int32_t tile_triangles, std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
   if (tile_triangles < 64) {
     throw Error(ErrorCode::Usage, "--tile-triangles is " + std::to_string(tile_triangles) + "; expected at least 64");
   }
-  const TileBounds box = boundsOf(frame.toScheme(finest.vertices));
   const auto tilesAt = [&](std::int32_t zoom) { return frame.tilesIntersecting(box, zoom).size(); };
   // The finest zoom at which the data fits in at most two tiles: the coarsest zoom worth
   // showing, and the finest one for data that one tile holds.
@@ -372,7 +435,7 @@ ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t t
   } else {
     plan.max_zoom = fit_zoom;
     while (plan.max_zoom < 24 &&
-           static_cast<double>(finest.triangleCount()) / static_cast<double>(tilesAt(plan.max_zoom)) > tile_triangles) {
+           static_cast<double>(finest_triangles) / static_cast<double>(tilesAt(plan.max_zoom)) > tile_triangles) {
       ++plan.max_zoom;
     }
   }

@@ -67,7 +67,9 @@ std::string_view assignmentName(Assignment assignment);
 // still Error(Input) from tile_scheme.h.
 class TileFrame {
  public:
-  TileFrame(TileSchemeKind kind, const DemGrid& dem);
+  // `local_extent` (CRS units; local scheme only): the extent the zoom-0 tile is made for, when
+  // `dem` is a window of a larger mosaic (a block); nullptr: dem's own extent.
+  TileFrame(TileSchemeKind kind, const DemGrid& dem, const TileBounds* local_extent = nullptr);
   ~TileFrame();
   TileFrame(const TileFrame&) = delete;
   TileFrame& operator=(const TileFrame&) = delete;
@@ -78,6 +80,20 @@ class TileFrame {
   // (PROJ's objects are not shared between threads); every point gets the same coordinates as
   // on one thread.
   std::vector<std::array<double, 2>> toScheme(std::span<const GridPoint> points) const;
+  // A block of the build in blocks (block_build.h) is one tile of some zoom, cut along pixel
+  // rows and columns, so its pixels reach up to half a pixel past the tile's square: from now
+  // on toScheme puts every point inside `key`'s square (moved by at most that half pixel, and a
+  // billionth of the tile inside its edges), so that every tile the block's faces and clusters
+  // go to is `key` or below it, whatever the rounding.
+  void keepInside(TileKey key);
+  // The build in blocks: the blocks' border pixel lines (mosaic columns and rows, ascending,
+  // from the first pixel to the last) and the scheme coordinate each stands for (a tile edge; the
+  // outer ones their own). From now on toScheme interpolates linearly between them, so a block
+  // border is exactly its tile's edge, in every block and in the levels made of their joined
+  // meshes alike (a point moves by at most half a pixel). Only for grids whose rows and columns
+  // the scheme's axes follow (WGS84 longitude and latitude under a web scheme; local).
+  void followBlocks(std::vector<double> col_lines, std::vector<double> col_values, std::vector<double> row_lines,
+                    std::vector<double> row_values);
   // Approximate tile coordinates of a grid point (col, row) in units of zoom-0 tiles: x east
   // from the scheme's west edge (geographic: 0 to 2), y in the direction the scheme counts
   // rows (webmercator and geographic: south from the north edge; local: north from the south
@@ -101,6 +117,8 @@ class TileFrame {
   // tile_scheme.h refuses them.
   double insideLatitude(double lat_deg) const;
 
+  // toScheme without keepInside.
+  std::vector<std::array<double, 2>> unclampedScheme(std::span<const GridPoint> points) const;
   // Tile coordinates (approximateTileCoordinates) of exact scheme coordinates.
   std::array<double, 2> tileCoordinates(std::array<double, 2> scheme) const;
 
@@ -112,6 +130,10 @@ class TileFrame {
   std::unique_ptr<ThreadTransforms> thread_transforms_;
   static constexpr int kLatticeCells = 64;
   std::vector<std::array<double, 2>> lattice_;  // (kLatticeCells + 1)^2 tile coordinates, row-major
+  bool keep_inside_ = false;
+  bool follow_blocks_ = false;
+  std::vector<double> col_lines_, col_values_, row_lines_, row_values_;  // followBlocks
+  TileBounds inside_;  // keepInside: the square points are kept in, in scheme coordinates
 };
 
 struct ZoomPlan {
@@ -126,6 +148,12 @@ struct ZoomPlan {
 // `tile_triangles` of the finest TIN's triangles each (or `forced_max_zoom` when >= 0).
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
                    std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4);
+// The same from the box of the finest TIN's vertices in scheme coordinates and its triangle
+// count (the build in blocks adds them up over its blocks).
+ZoomPlan planZooms(const TileFrame& frame, const TileBounds& data_box, std::size_t finest_triangles,
+                   std::int32_t tile_triangles, std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4);
+// The box of points in scheme coordinates (toScheme's), west, south, east, north.
+TileBounds schemeBounds(const std::vector<std::array<double, 2>>& points);
 
 struct TileFaces {
   TileKey key;

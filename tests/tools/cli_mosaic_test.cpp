@@ -124,6 +124,43 @@ TEST_SUITE("cli") {
     test::checkSeamless(checkOutput(dir / "directory", options, quiet));
   }
 
+  TEST_CASE("SRTM Gabon cut into 48 files builds in blocks the same tiles as one file and as a VRT, and they check") {
+    test::TempDir dir;
+    const std::string gabon = test::sharedData("srtm3_N00E010-E011_4326.tif");
+    fs::create_directories(dir.path() / "pieces");
+    const std::vector<std::string> pieces = cutIntoPieces(gabon, 8, 6, dir.path() / "pieces");
+    REQUIRE(pieces.size() == 48);
+    buildVrt(dir / "pieces.vrt", pieces);
+    // Blocks of at most 512 px: tiles of zoom 10 (about 420 px), 7 x 3 of them over the
+    // raster's 2401 x 1201 px, which write zoom 11 on their own; zooms 8 to 10 are made from
+    // their joined levels at zoom 10.
+    const auto build = [&](std::vector<std::string> inputs, const std::string& name) {
+      std::vector<std::string> args{"build"};
+      args.insert(args.end(), inputs.begin(), inputs.end());
+      for (const char* option : {"--tin-max-error", "20", "--no-report", "--block-pixels", "512"}) args.push_back(option);
+      args.push_back("-o");
+      args.push_back(dir / name);
+      const auto result = test::runTerratiles(args);
+      CAPTURE(result.err);
+      REQUIRE(result.exit_code == 0);
+      CHECK(result.err.find("  blocks   21 (7 x 3 tiles of zoom 10, at most 512 px a side) wrote zooms 11 to 11\n") !=
+            std::string::npos);
+      CHECK_FALSE(fs::exists(dir.path() / (name + ".blocks")));
+      return tileBytes(dir.path() / name);
+    };
+    const auto whole = build({gabon}, "whole");
+    REQUIRE(whole.size() > 50);
+    checkSameBytes(whole, build(pieces, "files"));
+    checkSameBytes(whole, build({dir / "pieces.vrt"}, "vrt"));
+
+    // Seamless within and across zooms, every decoded error within its geometricError: the
+    // blocks' tiles meet their neighbours' and the coarser zooms' vertex for vertex.
+    Progress quiet;
+    CheckOptions options;
+    options.cuts = 300;
+    test::checkSeamless(checkOutput(dir / "files", options, quiet));
+  }
+
   TEST_CASE("inputs that are no mosaic are refused before anything is written") {
     test::TempDir dir;
     fs::create_directories(dir.path() / "empty");

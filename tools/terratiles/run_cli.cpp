@@ -128,6 +128,7 @@ void printJsonSummary(const BuildSummary& s, std::ostream& err) {
   j["bytes_written"] = s.bytes;     // every file, reports included
   j["worst_error_m"] = s.worst_error_m;
   j["seconds"] = s.seconds;
+  if (!s.blocks.empty()) j["blocks"] = s.blocks;
   j["check"] = s.check_ran ? (s.check_ok ? "ok" : "failed") : "not run";
   err << j.dump() << "\n" << std::flush;
 }
@@ -142,6 +143,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
        << s.min_height_m << " .. " << s.max_height_m << " m, centre " << std::setprecision(5)
        << s.centre_lat_deg << " N " << s.centre_lon_deg << " E\n";
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
+  if (!s.blocks.empty()) text << "  blocks   " << s.blocks << "\n";
   for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
   text << "  zoom clusters  tiles   triangles  redundancy        bytes  B/tri  step mm   max err m   rms err m  geomError m\n";
   std::size_t tile_triangles = 0;
@@ -349,14 +351,6 @@ void appendBlockMesh(TinFileStream& file, BlockVertexNumbering& numbering, const
   for (std::size_t t = 0; t < idx.size(); t += 3) file.addTriangle(numbers[idx[t]], numbers[idx[t + 1]], numbers[idx[t + 2]]);
 }
 
-// Where one rank failed, every rank learns it here (Ranks::agree): the failing one throws
-// its own error, the others one that points at it.
-void meetRanks(const std::exception_ptr& failure) {
-  if (Ranks::agree(failure ? 1 : 0) == 0) return;
-  if (failure) std::rethrow_exception(failure);
-  throw Error(ErrorCode::Internal, "rank " + std::to_string(Ranks::rank()) + " stops: another rank failed (its "
-                                   "error is above)");
-}
 
 // `terratiles tin` on a mosaic cut into blocks (src/pipeline/block_tin.h). Every block's TIN
 // is a file in OUTPUT.blocks/ (written whole or not at all), made by rank b mod N of N (one
@@ -427,7 +421,7 @@ void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosai
       failure = std::current_exception();
     }
   }
-  meetRanks(failure);
+  Ranks::meet(failure);
 
   // 2. Every rank makes its blocks that are not there yet.
   std::size_t reused = 0, mine = 0;
@@ -452,7 +446,7 @@ void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosai
   } catch (...) {
     failure = std::current_exception();
   }
-  meetRanks(failure);
+  Ranks::meet(failure);
   if (!leader) return;
   if (reused > 0) progress.note("resumed: " + std::to_string(reused) + " of " + std::to_string(mine) + " blocks were done already");
 
@@ -861,6 +855,16 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
       ->add_option("--max-zoom", build.max_zoom,
                    "Finest zoom (-1: from the data: --tile-triangles, or for --lod grid one root tile)")
       ->capture_default_str();
+  build_command
+      ->add_option("--block-pixels", build.block_pixels,
+                   "Build in blocks: each a tile of one zoom at most this many pixels a side, read, triangulated, "
+                   "simplified and written on its own, its outline locked until the blocks' levels join for the "
+                   "coarser zooms (0: blocks of 2048 when the mosaic has more than 64 M pixels)")
+      ->capture_default_str();
+  build_command->add_flag("--resume", build.resume,
+                          "Blocks: continue an interrupted build (killed, power lost) from the block files it left in "
+                          "OUTDIR.blocks/, making only the missing blocks; the output is the same as an "
+                          "uninterrupted build's");
   HeightChoice build_heights;
   addHeightOptions(*build_command, build_heights.heights, build.geoid_path);
   build_command->add_flag("--implicit", build.implicit_tiling,
@@ -1115,9 +1119,9 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     runLevelsCommand(levels, progress, quiet, err);
     return 0;
   }
-  // Under mpirun: `tin` in blocks spreads them over the ranks; any other command runs on rank
-  // 0 alone, as without mpirun (the others leave at once).
-  if (Ranks::size() > 1 && !tin_command->parsed() && Ranks::rank() != 0) return 0;
+  // Under mpirun: `tin` and `build` in blocks spread them over the ranks; any other command
+  // runs on rank 0 alone, as without mpirun (the others leave at once).
+  if (Ranks::size() > 1 && !tin_command->parsed() && !build_command->parsed() && Ranks::rank() != 0) return 0;
   if (tin_command->parsed()) {
     Progress progress(progressModeFor(progress_choice, quiet));
     InterruptGuard interrupt_guard;
@@ -1147,9 +1151,10 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     if (build_threads > 0) {
       thread_limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(build_threads));
     }
-    Progress progress(progressModeFor(progress_choice, quiet));
+    Progress progress(progressModeFor(Ranks::rank() == 0 ? progress_choice : std::string("none"), quiet));
     InterruptGuard interrupt_guard;
     const BuildSummary summary = runPipeline(build, progress);
+    if (Ranks::rank() != 0) return 0;  // rank 0 tells
     if (!quiet && progress_choice == "json") {
       printJsonSummary(summary, err);
     } else if (!quiet) {

@@ -1,0 +1,1065 @@
+#include "src/pipeline/block_build.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <optional>
+#include <tuple>
+
+#include <nlohmann/json.hpp>
+
+#include "formats/geoid/read_geoid.h"
+#include "formats/gltf/write_glb.h"
+#include "formats/output_directory.h"
+#include "src/base/block_record.h"
+#include "src/base/error.h"
+#include "src/base/largest_first.h"
+#include "src/base/ranks.h"
+#include "src/base/version.h"
+#include "src/geo/crs_transform.h"
+#include "src/geo/dem_on_globe.h"
+#include "src/lod/build_levels.h"
+#include "src/pipeline/block_tin.h"
+#include "src/pipeline/drawn_tiles.h"
+#include "src/pipeline/tile_output.h"
+#include "tileset/implicit_tileset.h"
+
+namespace terratiles {
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+// The mosaic's grid without its heights: what TileFrame needs of the whole mosaic.
+DemGrid mosaicFrameGrid(const DemMosaic& mosaic) {
+  DemGrid grid;
+  grid.width = static_cast<std::int32_t>(mosaic.width);
+  grid.height = static_cast<std::int32_t>(mosaic.height);
+  grid.origin_x = mosaic.origin_x;
+  grid.origin_y = mosaic.origin_y;
+  grid.pixel_size_x = mosaic.pixel_size;
+  grid.pixel_size_y = mosaic.pixel_size;
+  grid.crs_wkt = mosaic.crs_wkt;
+  grid.crs_name = mosaic.crs_name;
+  grid.lattice_origin_x = mosaic.origin_x;
+  grid.lattice_origin_y = mosaic.origin_y;
+  return grid;
+}
+
+// The local scheme's extent: the mosaic's (whatever window a frame is made on).
+TileBounds mosaicExtent(const DemMosaic& mosaic) {
+  return {mosaic.origin_x, mosaic.origin_y - static_cast<double>(mosaic.height) * mosaic.pixel_size,
+          mosaic.origin_x + static_cast<double>(mosaic.width) * mosaic.pixel_size, mosaic.origin_y};
+}
+
+// Pixel borders along the edges of one axis's tiles: `edge(k)` is the scheme coordinate of
+// the k-th tile edge (k from k_first to k_last, increasing in pixels) and `pixel(value)` the
+// axis's pixel coordinate of a scheme coordinate (pixel centres at whole numbers). A border
+// goes to the nearest pixel line, at least 2 pixels from the mosaic's edges and from the
+// previous border. `lines` and `values`: every border and the scheme coordinate it stands for,
+// the outer ones included (with their own coordinates).
+struct AxisBorders {
+  std::vector<std::int64_t> borders;
+  std::vector<double> lines, values;
+};
+
+AxisBorders tileBorders(std::int64_t length, const std::function<double(std::int64_t)>& edge,
+                        const std::function<double(double)>& pixel, const std::function<double(double)>& coordinate,
+                        std::int64_t k_first, std::int64_t k_last) {
+  AxisBorders out;
+  out.borders.push_back(0);
+  out.values.push_back(coordinate(0));
+  for (std::int64_t k = k_first; k <= k_last; ++k) {
+    const double value = edge(k);
+    const double at = pixel(value);
+    if (!std::isfinite(at)) continue;
+    const auto line = static_cast<std::int64_t>(std::llround(at));
+    if (line >= out.borders.back() + 2 && line <= length - 3) {
+      out.borders.push_back(line);
+      out.values.push_back(value);
+    }
+  }
+  const std::int64_t last = std::max<std::int64_t>(length - 1, 0);
+  out.borders.push_back(last);
+  out.values.push_back(coordinate(static_cast<double>(last)));
+  for (const std::int64_t b : out.borders) out.lines.push_back(static_cast<double>(b));
+  return out;
+}
+
+// Where the build's tiles meet the mosaic's pixels: the frame over the whole mosaic, and
+// (when the scheme's tiles follow the DEM's rows and columns) each axis's pixel coordinate of
+// a scheme coordinate.
+struct BlockLayout {
+  std::int32_t zoom = 0;  // Zb: a block is one tile of it
+  BlockGrid grid;
+  std::vector<TileKey> keys;  // per block, row-major: its tile at Zb
+  AxisBorders columns, rows;  // for TileFrame::followBlocks
+  void follow(TileFrame& frame) const { frame.followBlocks(columns.lines, columns.values, rows.lines, rows.values); }
+};
+
+// x (lon or CRS x) and y (lat or CRS y) of the scheme for pixel (col, row), and back.
+double pixelColumnOf(const DemMosaic& mosaic, double x) { return (x - mosaic.origin_x) / mosaic.pixel_size - 0.5; }
+double pixelRowOf(const DemMosaic& mosaic, double y) { return (mosaic.origin_y - y) / mosaic.pixel_size - 0.5; }
+
+BlockLayout layBlocks(const BuildOptions& options, const DemMosaic& mosaic, const TileFrame& frame,
+                      std::int32_t block_pixels) {
+  const TileSchemeKind kind = options.scheme;
+  if (kind != TileSchemeKind::Local && !CrsToWgs84(mosaic.crs_wkt).isWgs84LonLat()) {
+    throw Error(ErrorCode::Usage,
+                "the build in blocks needs the " + std::string(tileSchemeName(kind)) +
+                    " tiles along the DEM's rows and columns, which " + mosaic.crs_name +
+                    " pixels are not; use --scheme local, or reproject the DEM to WGS84 longitude and latitude "
+                    "(gdalwarp -t_srs EPSG:4326), or pass --block-pixels larger than the mosaic (" +
+                    std::to_string(mosaic.width) + " x " + std::to_string(mosaic.height) + ")");
+  }
+  // The data's extent in scheme coordinates (pixel centres at the corners).
+  const double west = mosaic.origin_x + 0.5 * mosaic.pixel_size;
+  const double east = mosaic.origin_x + (static_cast<double>(mosaic.width) - 0.5) * mosaic.pixel_size;
+  const double north = mosaic.origin_y - 0.5 * mosaic.pixel_size;
+  const double south = mosaic.origin_y - (static_cast<double>(mosaic.height) - 0.5) * mosaic.pixel_size;
+  const double lat_limit = kind == TileSchemeKind::WebMercator ? kWebMercatorMaxLatitudeDeg : 90.0;
+  const auto clampLat = [&](double lat) { return kind == TileSchemeKind::Local ? lat : std::clamp(lat, -lat_limit, lat_limit); };
+  // Zb: the coarsest zoom whose tiles over the data span at most block_pixels pixels a side.
+  BlockLayout layout;
+  const auto tileAtPoint = [&](double x, double y, std::int32_t zoom) {
+    return frame.tileAt({x, clampLat(y)}, zoom);
+  };
+  const auto boundsOf = [&](TileKey key) {
+    return kind == TileSchemeKind::Local ? tileBounds(frame.local(), key) : tileBoundsDeg(kind, key);
+  };
+  const double equator_most = kind == TileSchemeKind::Local ? (south + north) / 2 : std::clamp(0.0, south, north);
+  for (layout.zoom = 0; layout.zoom < kMaxTileZoom; ++layout.zoom) {
+    const TileBounds b = boundsOf(tileAtPoint((west + east) / 2, equator_most, layout.zoom));
+    if ((b.east - b.west) / mosaic.pixel_size <= block_pixels && (b.north - b.south) / mosaic.pixel_size <= block_pixels) {
+      break;
+    }
+  }
+  const std::int32_t z = layout.zoom;
+  const TileKey nw = tileAtPoint(west, north, z), se = tileAtPoint(east, south, z);
+  const std::int64_t x_first = std::min(nw.x, se.x), x_last = std::max(nw.x, se.x);
+  const std::int64_t y_first = std::min(nw.y, se.y), y_last = std::max(nw.y, se.y);
+  // Column borders at the tiles' west edges, row borders at their north (local: south) edges.
+  const auto columnOf = [&](double x) { return pixelColumnOf(mosaic, x); };
+  const auto rowOf = [&](double y) { return pixelRowOf(mosaic, y); };
+  const auto xOf = [&](double col) { return mosaic.origin_x + (col + 0.5) * mosaic.pixel_size; };
+  const auto yOf = [&](double row) { return mosaic.origin_y - (row + 0.5) * mosaic.pixel_size; };
+  layout.columns = tileBorders(
+      mosaic.width, [&](std::int64_t x) { return boundsOf({z, static_cast<std::int32_t>(x), nw.y}).west; }, columnOf,
+      xOf, x_first + 1, x_last);
+  if (kind == TileSchemeKind::Local) {
+    // Rows from the south: walking north to south, tile y_last - k's south edge.
+    layout.rows = tileBorders(
+        mosaic.height, [&](std::int64_t k) { return boundsOf({z, nw.x, static_cast<std::int32_t>(y_last - k)}).south; },
+        rowOf, yOf, 0, y_last - y_first - 1);
+  } else {
+    layout.rows = tileBorders(
+        mosaic.height, [&](std::int64_t y) { return boundsOf({z, nw.x, static_cast<std::int32_t>(y)}).north; }, rowOf,
+        yOf, y_first + 1, y_last);
+  }
+  layout.grid.cols = layout.columns.borders;
+  layout.grid.rows = layout.rows.borders;
+  for (std::size_t j = 0; j < layout.grid.rowCount(); ++j) {
+    for (std::size_t i = 0; i < layout.grid.columnCount(); ++i) {
+      const double col = 0.5 * static_cast<double>(layout.grid.cols[i] + layout.grid.cols[i + 1]);
+      const double row = 0.5 * static_cast<double>(layout.grid.rows[j] + layout.grid.rows[j + 1]);
+      layout.keys.push_back(tileAtPoint(mosaic.origin_x + (col + 0.5) * mosaic.pixel_size,
+                                        mosaic.origin_y - (row + 0.5) * mosaic.pixel_size, z));
+    }
+  }
+  return layout;
+}
+
+// The largest side of the ECEF box of the scheme box `b` (degrees for the web schemes, CRS
+// units for local) between two heights, sampled on 17 x 17 points and grown by the most a
+// chord between neighbouring samples can bow out (the box of a curved surface), in metres.
+double ecefExtent(TileSchemeKind kind, const CrsToWgs84* to_wgs84, TileBounds b, double low_m, double high_m) {
+  constexpr int n = 17;
+  std::vector<GeodeticPoint> points;
+  std::vector<CrsPoint> crs;
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      const double x = b.west + (b.east - b.west) * i / (n - 1), y = b.south + (b.north - b.south) * j / (n - 1);
+      if (kind == TileSchemeKind::Local) {
+        crs.push_back({x, y});
+      } else {
+        points.push_back({x, y, 0});
+      }
+    }
+  }
+  if (kind == TileSchemeKind::Local) {
+    points.resize(crs.size());
+    to_wgs84->transform(crs, points);
+  }
+  std::vector<GeodeticPoint> both;
+  for (const double h : {low_m, high_m}) {
+    for (GeodeticPoint p : points) {
+      p.height_m = h;
+      both.push_back(p);
+    }
+  }
+  std::vector<EcefPoint> ecef(both.size());
+  geodeticToEcef(both, ecef);
+  EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (const EcefPoint& p : ecef) {
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  // Neighbouring samples: at most the box's diagonal / (n - 1) apart on the Earth; a chord of
+  // length L bows L^2 / 8R from the sphere, a sphere cap between samples at most as much.
+  const double diagonal = std::hypot(hi.x - lo.x, hi.y - lo.y, hi.z - lo.z);
+  const double spacing = std::min(diagonal, 2 * 6378137.0 * std::numbers::pi / 2) / (n - 1) * 2;
+  const double bow = spacing * spacing / (8 * 6356752.0) + 1.0;
+  return std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z}) + 2 * bow;
+}
+
+// Per zoom, the Draco grid its tiles share (BuildOptions::position_step_m, or a power-of-two
+// multiple where its tiles are too wide for 2^23 steps): from the ECEF size of three by three
+// of its tiles (a tile's content reaches at most one tile past its square: the finer level's
+// clusters come from partitions of tile neighbourhoods) or of the data, the smaller; known
+// before any tile is made, so every block snaps alike.
+std::map<std::int32_t, double> zoomSteps(const BuildOptions& options, const DemMosaic& mosaic, const TileFrame& frame,
+                                         const TileBounds& data_box, std::int32_t min_zoom, std::int32_t max_zoom,
+                                         double low_m, double high_m) {
+  const TileSchemeKind kind = options.scheme;
+  std::unique_ptr<CrsToWgs84> to_wgs84;
+  if (kind == TileSchemeKind::Local) to_wgs84 = std::make_unique<CrsToWgs84>(mosaic.crs_wkt);
+  const double data_extent = ecefExtent(kind, to_wgs84.get(), data_box, low_m, high_m);
+  std::map<std::int32_t, double> steps;
+  for (std::int32_t zoom = min_zoom; zoom <= max_zoom; ++zoom) {
+    double widest = 0;
+    // The tiles of the zoom nearest the equator (web) or at the data's corners and centre
+    // (local) are the widest; three by three around them.
+    std::vector<std::array<double, 2>> at;
+    const double lat = kind == TileSchemeKind::Local ? (data_box.south + data_box.north) / 2
+                                                     : std::clamp(0.0, data_box.south, data_box.north);
+    at.push_back({(data_box.west + data_box.east) / 2, lat});
+    if (kind == TileSchemeKind::Local) {
+      at.push_back({data_box.west, data_box.south});
+      at.push_back({data_box.east, data_box.north});
+      at.push_back({data_box.west, data_box.north});
+      at.push_back({data_box.east, data_box.south});
+    }
+    for (const auto& p : at) {
+      const TileKey key = frame.tileAt(p, zoom);
+      TileBounds b = kind == TileSchemeKind::Local ? tileBounds(frame.local(), key) : tileBoundsDeg(kind, key);
+      const double w = b.east - b.west, h = b.north - b.south;
+      b = {b.west - w, b.south - h, b.east + w, b.north + h};
+      if (kind != TileSchemeKind::Local) {
+        const double limit = kind == TileSchemeKind::WebMercator ? kWebMercatorMaxLatitudeDeg : 90.0;
+        b.south = std::max(b.south, -limit);
+        b.north = std::min(b.north, limit);
+        if (b.east - b.west > 360) b.west = -180, b.east = 180;
+      }
+      widest = std::max(widest, ecefExtent(kind, to_wgs84.get(), b, low_m, high_m));
+    }
+    steps[zoom] = sharedPositionStep(std::min(widest, data_extent), options.position_step_m, kMaxExactPositionBits);
+  }
+  return steps;
+}
+
+// A unit normal at pixel (col, row) of `globe` from its four neighbours' DEM points (one side
+// where a neighbour is missing or nodata; the ellipsoid normal where both are): what two blocks
+// that share the pixel both compute, from the same pixels, for a vertex on their border.
+FloatNormal pixelNormal(const DemOnGlobe& globe, std::int32_t col, std::int32_t row) {
+  const DemGrid& dem = globe.dem();
+  const auto valid = [&](std::int32_t c, std::int32_t r) {
+    return c >= 0 && r >= 0 && c < dem.width && r < dem.height && dem.isValid(c, r);
+  };
+  const auto span = [&](std::int32_t c0, std::int32_t r0, std::int32_t c1, std::int32_t r1) {
+    const std::int32_t ca = valid(c0, r0) ? c0 : col, ra = valid(c0, r0) ? r0 : row;
+    const std::int32_t cb = valid(c1, r1) ? c1 : col, rb = valid(c1, r1) ? r1 : row;
+    const EcefPoint a = globe.point(ca, ra), b = globe.point(cb, rb);
+    return EcefPoint{b.x - a.x, b.y - a.y, b.z - a.z};
+  };
+  const EcefPoint east = span(col - 1, row, col + 1, row), south = span(col, row - 1, col, row + 1);
+  // east x south points down (rows go south): north x east points up.
+  EcefPoint n{south.y * east.z - south.z * east.y, south.z * east.x - south.x * east.z,
+              south.x * east.y - south.y * east.x};
+  double length = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+  if (length == 0) {
+    const UnitVector up = globe.up(col, row);
+    return {static_cast<float>(up[0]), static_cast<float>(up[1]), static_cast<float>(up[2])};
+  }
+  const UnitVector up = globe.up(col, row);
+  if (n.x * up[0] + n.y * up[1] + n.z * up[2] < 0) length = -length;
+  return {static_cast<float>(n.x / length), static_cast<float>(n.y / length), static_cast<float>(n.z / length)};
+}
+
+// One zoom to write: a level mesh, its tiles, and per vertex the grid it snaps to.
+struct ZoomToWrite {
+  std::int32_t zoom = 0;
+  std::size_t clusters = 0;
+  const TinMesh* mesh = nullptr;
+  std::vector<PyramidTile> tiles;
+  std::vector<double> vertex_step;  // per vertex of mesh, a multiple of step
+  double step = 0;                  // the zoom's own grid
+};
+
+// What a zoom's tiles added up to, over blocks and the rest.
+struct ZoomTally {
+  std::size_t clusters = 0, tiles = 0, vertices = 0, triangles = 0, tile_triangles = 0, bytes = 0;
+  double max_error_m = 0, sum_squares = 0;
+  std::size_t drawn_pixels = 0;
+  int position_bits = 0;
+  double step = 0;
+  void add(const ZoomTally& other) {
+    clusters += other.clusters;
+    tiles += other.tiles;
+    vertices += other.vertices;
+    triangles += other.triangles;
+    tile_triangles += other.tile_triangles;
+    bytes += other.bytes;
+    max_error_m = std::max(max_error_m, other.max_error_m);
+    sum_squares += other.sum_squares;
+    drawn_pixels += other.drawn_pixels;
+    position_bits = std::max(position_bits, other.position_bits);
+    step = other.step;
+  }
+};
+
+// A tile's drawn triangles as the next coarser zoom measures against them (its grid positions
+// in mosaic pixels).
+struct DrawnTriangles {
+  std::vector<EcefPoint> positions;
+  std::vector<GridCorner> grid;
+  std::vector<std::uint32_t> triangle_indices;
+  double shift_m = 0;
+};
+
+struct WrittenZooms {
+  std::map<std::int32_t, ZoomTally> tallies;
+  std::vector<TileNode> nodes;
+  std::vector<DrawnTriangles> coarsest;  // the last zoom's tiles, when asked for
+};
+
+// Draws, measures, encodes and writes `zooms` (finest first) against `globe`: as the whole
+// build does, each tile's error against the DEM pixels under it and against the next finer
+// zoom's drawn surface (for the first zoom: `finer`, when not null). `normals_fix` may replace
+// level normals (blocks: their border vertices'). `keep_coarsest`: the last zoom's drawn
+// triangles are returned, grid positions moved by (col0, row0) into the mosaic's pixels.
+WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe, const ZoomSurface* finer,
+                        const GlbOptions& glb_base, bool implicit_tiling, OutputDirectory& output,
+                        const std::function<void(const TinMesh&, std::vector<FloatNormal>&)>& normals_fix,
+                        bool keep_coarsest, std::int64_t col0, std::int64_t row0) {
+  WrittenZooms out;
+  const DemGrid& dem = globe.dem();
+  const PixelBoxes boxes(globe);
+  tbb::enumerable_thread_specific<ContentScratch> content_scratch;
+  std::array<ZoomSurface, 2> surfaces;
+  for (std::size_t k = 0; k < zooms.size(); ++k) {
+    ZoomToWrite& zoom = zooms[k];
+    const TinMesh& mesh = *zoom.mesh;
+    std::vector<EcefPoint> snapped(mesh.vertices.size());
+    globe.place(mesh.vertices, {}, snapped);
+    std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
+    if (normals_fix) normals_fix(mesh, normals);
+    double largest_step = zoom.step;
+    for (std::size_t v = 0; v < snapped.size(); ++v) {
+      const double step = zoom.vertex_step[v];
+      largest_step = std::max(largest_step, step);
+      EcefPoint& p = snapped[v];
+      p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
+    }
+    const double shift_m = 0.87 * largest_step;
+    ZoomSurface& surface = surfaces[k % 2];
+    if (surface.empty()) {
+      surface = ZoomSurface(dem.pixelCount());
+    } else {
+      surface.clear();
+    }
+    GlbOptions glb = glb_base;
+    glb.position_step_m = zoom.step;
+    struct Encoded {
+      std::vector<std::uint8_t> glb;
+      Region region;
+      DrawnTileMeasure measure;
+      int position_bits = 0;
+      DrawnTriangles kept;
+    };
+    std::vector<Encoded> encoded(zoom.tiles.size());
+    std::vector<std::size_t> order(encoded.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+      return zoom.tiles[i].triangleCount() > zoom.tiles[j].triangleCount();
+    });
+    const bool keep = keep_coarsest && k + 1 == zooms.size();
+    forEachLargestFirst(order, [&](std::size_t i) {
+      DrawnContent content = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
+      Encoded& e = encoded[i];
+      e.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
+                                   &surface, nullptr, &boxes);
+      e.region = drawnRegion(content.positions, content.triangle_indices);
+      e.glb = encodeContent(content, glb, &e.position_bits);
+      if (keep) {
+        for (GridCorner& g : content.grid) {
+          g.col += static_cast<double>(col0);
+          g.row += static_cast<double>(row0);
+        }
+        e.kept = {std::move(content.positions), std::move(content.grid), std::move(content.triangle_indices), shift_m};
+      }
+    });
+    ZoomTally& tally = out.tallies[zoom.zoom];
+    tally.step = zoom.step;
+    tally.clusters = zoom.clusters;
+    tally.tiles = zoom.tiles.size();
+    tally.vertices = mesh.vertices.size();
+    tally.triangles = mesh.triangleCount();
+    for (std::size_t i = 0; i < encoded.size(); ++i) {
+      Encoded& e = encoded[i];
+      const PyramidTile& tile = zoom.tiles[i];
+      tally.tile_triangles += tile.triangleCount();
+      tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), e.glb);
+      tally.max_error_m = std::max(tally.max_error_m, e.measure.max_error_m);
+      tally.position_bits = std::max(tally.position_bits, e.position_bits);
+      TileNode node;
+      node.key = tile.key;
+      node.content_uri = contentUri(tile.key, implicit_tiling);
+      node.region = e.region;
+      node.geometric_error_m = roundUpToMicrometre(std::max(e.measure.max_error_m, e.measure.finer_difference_m));
+      out.nodes.push_back(std::move(node));
+      if (keep) out.coarsest.push_back(std::move(e.kept));
+    }
+    for (std::size_t p = 0; p < dem.pixelCount(); ++p) {
+      if (!surface.drawn(p)) continue;
+      tally.sum_squares += surface.error(p) * surface.error(p);
+      ++tally.drawn_pixels;
+    }
+    finer = &surface;
+  }
+  return out;
+}
+
+// Per vertex of each zoom (finest first), the grid it snaps to: its zoom's own, or where it is
+// on a tile outline of its zoom and of the next coarser one (the same vertex, unmoved) the
+// coarser one's, down the chain of outlines (what the whole build does). The coarsest zoom's
+// outline vertices that live on, unmoved, in `next_level` (the level shown at the zoom below
+// it, not written here) take `next_step`.
+void chainSteps(std::vector<ZoomToWrite>& zooms, const std::vector<const std::vector<std::uint32_t>*>& index_in_coarser,
+                const TinMesh* next_level, double next_step) {
+  std::vector<std::uint8_t> coarser_outline;
+  for (std::size_t k = zooms.size(); k-- > 0;) {
+    ZoomToWrite& zoom = zooms[k];
+    const TinMesh& mesh = *zoom.mesh;
+    std::vector<std::uint8_t> outline = tileOutlineVertices(mesh, zoom.tiles);
+    zoom.vertex_step.assign(mesh.vertices.size(), zoom.step);
+    const std::vector<std::uint32_t>* map = index_in_coarser[k];
+    const TinMesh* coarser = k + 1 < zooms.size() ? zooms[k + 1].mesh : next_level;
+    if (map && coarser) {
+      for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+        const std::uint32_t w = (*map)[v];
+        if (!outline[v] || w == kRemovedVertex) continue;
+        if (k + 1 < zooms.size() && !coarser_outline[w]) continue;
+        const GridPoint& here = mesh.vertices[v];
+        const GridPoint& there = coarser->vertices[w];
+        if (here.col != there.col || here.row != there.row || here.height_m != there.height_m) continue;
+        const double inherited = k + 1 < zooms.size() ? zooms[k + 1].vertex_step[w] : next_step;
+        zoom.vertex_step[v] = std::max(zoom.step, inherited);
+      }
+    }
+    coarser_outline = std::move(outline);
+  }
+}
+
+// What a block hands over: its level at Zb in mosaic pixels, and what it wrote.
+struct BlockHandover {
+  std::size_t column = 0, row = 0;
+  PixelWindow window;
+  TinMesh level;  // the level shown at Zb, in the window's grid
+  std::vector<std::int32_t> inherited;  // per face of `level`: its cluster of the level at Zb + 1
+  std::vector<TileKey> cluster_tiles;   // per such cluster: its tile at Zb + 1
+  WrittenZooms written;
+};
+
+// The level options of the build (as runPipeline sets them) for levels shown from `top_zoom` down.
+LevelOptions buildLevelOptions(const BuildOptions& options, const DemOnGlobe& globe, const TileFrame& frame,
+                               std::int32_t top_zoom, std::int32_t levels_below, std::vector<std::int32_t> clusters) {
+  LevelOptions level_options;
+  level_options.globe = &globe;
+  level_options.clusters_per_level = std::move(clusters);
+  level_options.level_ratio = options.level_ratio;
+  level_options.simplifier = options.simplifier;
+  level_options.measure = false;
+  if (options.level_error_growth > 0) {
+    level_options.level_error_growth = options.level_error_growth;
+    level_options.first_budget_m = options.tin_max_error_m * options.level_error_growth *
+                                   std::pow(options.level_error_growth, static_cast<double>(levels_below));
+  }
+  level_options.seed += static_cast<std::uint32_t>(levels_below);
+  if (options.assignment == Assignment::Merge && options.join_tile_clusters) {
+    level_options.regroup_clusters = joinTileClusters(frame, top_zoom);
+  }
+  if (!options.global_partition) level_options.partition_regions = tileRegions(frame, top_zoom);
+  return level_options;
+}
+
+// Assigns the clusters of levels[0 .. count - 1] (level l shown at top_zoom - l) to tiles.
+std::vector<ZoomToWrite> assignZooms(const BuildOptions& options, const TileFrame& frame, const std::vector<Level>& levels,
+                                     std::size_t count, std::int32_t top_zoom, std::vector<TileKey>& cluster_tiles,
+                                     const std::map<std::int32_t, double>& steps) {
+  std::vector<ZoomToWrite> zooms;
+  std::vector<TileKey> own;
+  for (std::size_t l = 0; l < count; ++l) {
+    ZoomToWrite zoom;
+    zoom.zoom = top_zoom - static_cast<std::int32_t>(l);
+    zoom.clusters = static_cast<std::size_t>(levels[l].partition.cluster_count);
+    zoom.mesh = &levels[l].mesh;
+    zoom.step = steps.at(zoom.zoom);
+    for (TileFaces& tile : assignClusters(frame, levels[l], zoom.zoom, options.assignment, cluster_tiles, own)) {
+      PyramidTile t;
+      t.key = tile.key;
+      t.faces = std::move(tile.faces);
+      zoom.tiles.push_back(std::move(t));
+    }
+    cluster_tiles = std::move(own);
+    zooms.push_back(std::move(zoom));
+  }
+  return zooms;
+}
+
+
+constexpr char kStatsMagic[8] = {'T', 'T', 'B', 'S', 'T', 'A', 'T', '1'};
+constexpr char kHandoverMagic[8] = {'T', 'T', 'B', 'U', 'I', 'L', 'D', '1'};
+
+// What the zooms are chosen from: a block's TIN's triangles, scheme box and heights.
+struct BlockStats {
+  std::uint64_t triangles = 0;
+  TileBounds box{1e300, 1e300, -1e300, -1e300};
+  double low_m = 1e300, high_m = -1e300;
+};
+
+void writeStatsFile(const BlockStats& stats, const std::string& path) {
+  RecordWriter out;
+  out.bytes.assign(kStatsMagic, sizeof kStatsMagic);
+  out.put(stats);
+  writeRecordFile(path, out.bytes);
+}
+
+BlockStats readStatsFile(const std::string& path) {
+  const std::string bytes = readRecordFile(path);
+  RecordReader in{path, bytes};
+  in.expectMagic(kStatsMagic);
+  const auto stats = in.get<BlockStats>();
+  in.expectEnd();
+  return stats;
+}
+
+void writeHandoverFile(const BlockHandover& h, const std::string& path) {
+  RecordWriter out;
+  out.bytes.assign(kHandoverMagic, sizeof kHandoverMagic);
+  out.put(static_cast<std::uint64_t>(h.column));
+  out.put(static_cast<std::uint64_t>(h.row));
+  out.put(h.window);
+  out.putArray(h.level.vertices);
+  out.putArray(h.level.triangle_indices);
+  out.putArray(h.inherited);
+  out.putArray(h.cluster_tiles);
+  out.put(static_cast<std::uint64_t>(h.written.tallies.size()));
+  for (const auto& [zoom, tally] : h.written.tallies) {
+    out.put(zoom);
+    out.put(tally);
+  }
+  out.put(static_cast<std::uint64_t>(h.written.nodes.size()));
+  for (const TileNode& node : h.written.nodes) {
+    out.put(node.key);
+    out.put(node.region);
+    out.put(node.geometric_error_m);
+  }
+  out.put(static_cast<std::uint64_t>(h.written.coarsest.size()));
+  for (const DrawnTriangles& t : h.written.coarsest) {
+    out.putArray(t.positions);
+    out.putArray(t.grid);
+    out.putArray(t.triangle_indices);
+    out.put(t.shift_m);
+  }
+  writeRecordFile(path, out.bytes);
+}
+
+BlockHandover readHandoverFile(const std::string& path, bool implicit_tiling) {
+  const std::string bytes = readRecordFile(path);
+  RecordReader in{path, bytes};
+  in.expectMagic(kHandoverMagic);
+  BlockHandover h;
+  h.column = in.get<std::uint64_t>();
+  h.row = in.get<std::uint64_t>();
+  h.window = in.get<PixelWindow>();
+  h.level.vertices = in.getArray<GridPoint>();
+  h.level.triangle_indices = in.getArray<std::uint32_t>();
+  h.inherited = in.getArray<std::int32_t>();
+  h.cluster_tiles = in.getArray<TileKey>();
+  for (auto n = in.get<std::uint64_t>(); n > 0; --n) {
+    const auto zoom = in.get<std::int32_t>();
+    h.written.tallies[zoom] = in.get<ZoomTally>();
+  }
+  for (auto n = in.get<std::uint64_t>(); n > 0; --n) {
+    TileNode node;
+    node.key = in.get<TileKey>();
+    node.region = in.get<Region>();
+    node.geometric_error_m = in.get<double>();
+    node.content_uri = contentUri(node.key, implicit_tiling);
+    h.written.nodes.push_back(std::move(node));
+  }
+  for (auto n = in.get<std::uint64_t>(); n > 0; --n) {
+    DrawnTriangles t;
+    t.positions = in.getArray<EcefPoint>();
+    t.grid = in.getArray<GridCorner>();
+    t.triangle_indices = in.getArray<std::uint32_t>();
+    t.shift_m = in.get<double>();
+    h.written.coarsest.push_back(std::move(t));
+  }
+  in.expectEnd();
+  if (h.level.triangle_indices.size() % 3 != 0 || h.inherited.size() != h.level.triangle_indices.size() / 3) in.damaged();
+  for (const std::uint32_t v : h.level.triangle_indices) {
+    if (v >= h.level.vertices.size()) in.damaged();
+  }
+  for (const std::int32_t c : h.inherited) {
+    if (c < 0 || static_cast<std::size_t>(c) >= h.cluster_tiles.size()) in.damaged();
+  }
+  return h;
+}
+
+// Everything a block's files depend on: a resumed run keeps them only when this is the same.
+nlohmann::json blockManifest(const BuildOptions& options, std::int32_t block_pixels) {
+  nlohmann::json m;
+  m["generator"] = std::string("terratiles ") + kVersion;
+  std::vector<std::string> inputs;
+  for (const std::string& input : options.inputs) inputs.push_back(std::filesystem::absolute(input).lexically_normal().string());
+  m["inputs"] = inputs;
+  m["block_pixels"] = block_pixels;
+  m["scheme"] = std::string(tileSchemeName(options.scheme));
+  m["assign"] = std::string(assignmentName(options.assignment));
+  m["tin_max_error_m"] = options.tin_max_error_m;
+  m["tile_triangles"] = options.tile_triangles;
+  m["clusters_per_tile"] = options.clusters_per_tile;
+  m["join_tile_clusters"] = options.join_tile_clusters;
+  m["global_partition"] = options.global_partition;
+  m["level_ratio"] = options.level_ratio;
+  m["simplifier"] = options.simplifier == Simplifier::Cgal ? "cgal" : "native";
+  m["level_error_growth"] = options.level_error_growth;
+  m["heights"] = options.heights == HeightReference::Orthometric ? "orthometric" : "ellipsoidal";
+  m["geoid"] = options.geoid_path;
+  m["draco"] = options.draco;
+  m["implicit"] = options.implicit_tiling;
+  m["position_step_m"] = options.position_step_m;
+  m["draco_normal_bits"] = options.draco_normal_bits;
+  m["draco_speed"] = options.draco_speed;
+  return m;
+}
+
+}  // namespace
+
+std::int32_t buildBlockPixels(const BuildOptions& options, const DemMosaic& mosaic) {
+  if (options.lod != LodMethod::Clusters) return 0;
+  const std::int32_t block = options.block_pixels > 0                                   ? options.block_pixels
+                             : mosaic.width * mosaic.height > kBuildBlocksAbovePixels ? kBuildBlockPixels
+                                                                                      : 0;
+  if (block == 0 || (mosaic.width <= block + 2 && mosaic.height <= block + 2)) return 0;
+  return block;
+}
+
+BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mosaic, std::int32_t block_pixels,
+                                Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto refuse = [&](const std::string& option) {
+    throw Error(ErrorCode::Usage, option + " is not available with blocks yet (the mosaic has " +
+                                      std::to_string(mosaic.width) + " x " + std::to_string(mosaic.height) +
+                                      " pixels, built in blocks of " + std::to_string(block_pixels) +
+                                      "); pass --block-pixels larger than its sides");
+  };
+  if (!options.constraints.empty()) refuse("--constraints");
+  if (options.draco_position_bits > 0) refuse("--draco-position-bits");
+  if (options.max_zoom >= 0) refuse("--max-zoom");
+  const bool leader = Ranks::rank() == 0;
+  const auto ranks = static_cast<std::size_t>(Ranks::size()), rank = static_cast<std::size_t>(Ranks::rank());
+  Progress quiet_progress;
+  Progress& shown = leader ? progress : quiet_progress;
+
+  std::optional<GeoidGrid> geoid;
+  if (options.heights == HeightReference::Orthometric) {
+    geoid = readGeoidGrid(options.geoid_path.empty() ? kDefaultGeoidPath : options.geoid_path);
+  }
+  const GeoidGrid* geoid_grid = geoid ? &*geoid : nullptr;
+  const DemGrid frame_grid = mosaicFrameGrid(mosaic);
+  const TileBounds extent = mosaicExtent(mosaic);
+  const TileFrame frame(options.scheme, frame_grid, &extent);
+  const BlockLayout layout = layBlocks(options, mosaic, frame, block_pixels);
+  const BlockGrid& grid = layout.grid;
+  const std::size_t block_count = grid.blockCount();
+  shown.note("blocks: " + std::to_string(grid.columnCount()) + " x " + std::to_string(grid.rowCount()) +
+             " tiles of zoom " + std::to_string(layout.zoom) + " (at most " + std::to_string(block_pixels) +
+             " pixels a side)" + (ranks > 1 ? " on " + std::to_string(ranks) + " ranks" : std::string()));
+
+  // 0. Rank 0 prepares OUTDIR.blocks: kept for --resume when it holds the same work, else new.
+  // It holds the block files and the output's staging directory, which every rank writes into.
+  const std::filesystem::path blocks_dir = options.output_dir + ".blocks";
+  const std::filesystem::path staging = blocks_dir / "output";
+  const nlohmann::json manifest = blockManifest(options, block_pixels);
+  std::exception_ptr failure;
+  if (leader) {
+    try {
+      OutputDirectory check_target(options.output_dir, options.force, OutputDirectory::KeptStaging{staging});  // refuses a wrong target first
+      const std::filesystem::path manifest_path = blocks_dir / "manifest.json";
+      std::error_code ec;
+      bool keep = false;
+      if (std::filesystem::exists(manifest_path, ec)) {
+        std::ifstream in(manifest_path);
+        const nlohmann::json found = nlohmann::json::parse(in, nullptr, false);
+        if (options.resume && found != manifest) {
+          throw Error(ErrorCode::Usage, blocks_dir.string() + " holds the blocks of another build (other inputs, "
+                                        "options or version); run without --resume to start again");
+        }
+        keep = options.resume;
+        if (!keep) shown.note("an interrupted build's blocks in " + blocks_dir.string() + " were dropped (--resume continues them)");
+      }
+      if (!keep) {
+        std::filesystem::remove_all(blocks_dir, ec);
+        std::filesystem::create_directories(staging, ec);
+        if (ec) {
+          throw Error(ErrorCode::Output, blocks_dir.string() + ": cannot create the folder of the block files (" +
+                                             ec.message() + "); check that the output's folder is writable");
+        }
+        writeRecordFile(manifest_path.string(), manifest.dump(2) + "\n");
+      }
+    } catch (...) {
+      failure = std::current_exception();
+    }
+  }
+  Ranks::meet(failure);
+  OutputDirectory output(options.output_dir, options.force, OutputDirectory::KeptStaging{staging});
+  const auto blockPath = [&](std::size_t i, std::size_t j, const char* kind) {
+    return (blocks_dir / ("block_" + std::to_string(j) + "_" + std::to_string(i) + kind)).string();
+  };
+  std::size_t mine = 0, resumed_tins = 0, resumed_blocks = 0;
+  for (std::size_t b = rank; b < block_count; b += ranks) ++mine;
+
+  // 1. Every block's TIN, kept as a file while the zooms are chosen (block b on rank b mod N).
+  BlockTinOptions tin_options;
+  tin_options.max_error_m = options.tin_max_error_m;
+  tin_options.geoid = geoid_grid;
+  tin_options.measure = false;
+  shown.beginStage("TIN in " + std::to_string(block_count) + " blocks" +
+                       (ranks > 1 ? ", " + std::to_string(mine) + " on rank 0 of " + std::to_string(ranks) : std::string()),
+                   mine);
+  try {
+    for (std::size_t b = rank; b < block_count; b += ranks) {
+      const std::size_t i = b % grid.columnCount(), j = b / grid.columnCount();
+      std::error_code ec;
+      const bool done = std::filesystem::exists(blockPath(i, j, ".tin"), ec) ||
+                        std::filesystem::exists(blockPath(i, j, ".build"), ec);
+      if (!(options.resume && done)) {
+        const BlockTin tin = buildBlockTin(mosaic, grid, i, j, tin_options);
+        BlockStats stats;
+        if (tin.mesh.triangleCount() > 0) {
+          stats.triangles = tin.mesh.triangleCount();
+          DemGrid window = mosaicFrameGrid(mosaic);
+          window.col_offset = tin.window.col0;
+          window.row_offset = tin.window.row0;
+          window.width = tin.window.width;
+          window.height = tin.window.height;
+          window.origin_x = mosaic.origin_x + static_cast<double>(tin.window.col0) * mosaic.pixel_size;
+          window.origin_y = mosaic.origin_y - static_cast<double>(tin.window.row0) * mosaic.pixel_size;
+          TileFrame block_frame(options.scheme, window, &extent);
+          layout.follow(block_frame);
+          stats.box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
+          for (const GridPoint& p : tin.mesh.vertices) {
+            stats.low_m = std::min(stats.low_m, p.height_m);
+            stats.high_m = std::max(stats.high_m, p.height_m);
+          }
+        }
+        writeStatsFile(stats, blockPath(i, j, ".stats"));  // before the TIN: a TIN file means both are whole
+        writeBlockTinFile(tin, blockPath(i, j, ".tin"));
+      } else {
+        ++resumed_tins;
+      }
+      shown.advance();
+    }
+    shown.endStage();
+  } catch (...) {
+    failure = std::current_exception();
+  }
+  Ranks::meet(failure);
+
+  // The zooms, from every block's figures (every rank alike).
+  std::size_t finest_triangles = 0;
+  TileBounds data_box{1e300, 1e300, -1e300, -1e300};
+  double low_m = 1e300, high_m = -1e300;
+  for (std::size_t j = 0; j < grid.rowCount(); ++j) {
+    for (std::size_t i = 0; i < grid.columnCount(); ++i) {
+      const BlockStats stats = readStatsFile(blockPath(i, j, ".stats"));
+      if (stats.triangles == 0) continue;
+      finest_triangles += stats.triangles;
+      data_box = {std::min(data_box.west, stats.box.west), std::min(data_box.south, stats.box.south),
+                  std::max(data_box.east, stats.box.east), std::max(data_box.north, stats.box.north)};
+      low_m = std::min(low_m, stats.low_m);
+      high_m = std::max(high_m, stats.high_m);
+    }
+  }
+  if (finest_triangles == 0) {
+    throw Error(ErrorCode::Input, options.inputs.front() + ": no triangle can be built: the DEM has no three "
+                                  "neighbouring valid pixels; expected a DEM with some contiguous data");
+  }
+  const ZoomPlan plan = planZooms(frame, data_box, finest_triangles, options.tile_triangles, -1, options.clusters_per_tile);
+  // The blocks write zooms Zb + 1 .. max; the rest from Zb up is built from their levels at Zb.
+  const std::int32_t block_zoom = layout.zoom;
+  if (plan.max_zoom <= block_zoom || block_zoom < plan.min_zoom) {
+    throw Error(ErrorCode::Usage, "blocks of " + std::to_string(block_pixels) + " pixels are tiles of zoom " +
+                                      std::to_string(block_zoom) + ", but the zooms are " +
+                                      std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) +
+                                      "; expected blocks of a zoom between them: pass a --block-pixels of about " +
+                                      std::to_string(block_pixels >> std::max(1, block_zoom - plan.max_zoom + 1)) +
+                                      " (or larger than the mosaic's sides)");
+  }
+  shown.note("zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) + " (" +
+             std::string(tileSchemeName(options.scheme)) + "), " + std::to_string(plan.max_zoom - block_zoom) +
+             " of them written block by block");
+  const double margin_m = options.tin_max_error_m + 200;  // geoid and the surface between vertices
+  const std::map<std::int32_t, double> steps =
+      zoomSteps(options, mosaic, frame, data_box, plan.min_zoom, plan.max_zoom, low_m - margin_m, high_m + margin_m);
+  double top_step = 0;  // the grid of zooms min .. Zb
+  for (std::int32_t z = plan.min_zoom; z <= block_zoom; ++z) top_step = std::max(top_step, steps.at(z));
+  std::map<std::int32_t, double> top_steps;
+  for (std::int32_t z = plan.min_zoom; z <= block_zoom; ++z) top_steps[z] = top_step;
+
+  GlbOptions glb;
+  glb.draco = options.draco;
+  glb.normal_bits = options.draco_normal_bits;
+  glb.encoding_speed = options.draco_speed;
+  glb.generator = std::string("terratiles ") + kVersion;
+
+  // 2. Every block's levels down to Zb, its tiles of the zooms below Zb written, what it hands
+  // over kept as a file (written last: one that exists is whole, and so are the block's tiles).
+  const auto block_levels = static_cast<std::size_t>(plan.max_zoom - block_zoom);
+  shown.beginStage("levels and tiles in " + std::to_string(block_count) + " blocks" +
+                       (ranks > 1 ? ", " + std::to_string(mine) + " on rank 0 of " + std::to_string(ranks) : std::string()),
+                   mine);
+  try {
+    for (std::size_t b = rank; b < block_count; b += ranks) {
+      const std::size_t i = b % grid.columnCount(), j = b / grid.columnCount();
+      std::error_code ec;
+      if (options.resume && std::filesystem::exists(blockPath(i, j, ".build"), ec)) {
+        ++resumed_blocks;
+        shown.advance();
+        continue;
+      }
+      BlockTin tin = readBlockTinFile(blockPath(i, j, ".tin"));
+      BlockHandover handover;
+      handover.column = i;
+      handover.row = j;
+      handover.window = tin.window;
+      if (tin.mesh.triangleCount() > 0) {
+        const BlockGround ground = readBlock(mosaic, grid, i, j, geoid_grid);
+        TileFrame block_frame(options.scheme, ground.dem, &extent);
+        layout.follow(block_frame);
+        block_frame.keepInside(layout.keys[b]);
+        const TileBounds box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
+        std::vector<std::int32_t> clusters;
+        for (std::int32_t z = plan.max_zoom; z > block_zoom; --z) {
+          clusters.push_back(options.clusters_per_tile *
+                             static_cast<std::int32_t>(block_frame.tilesIntersecting(box, z).size()));
+        }
+        LevelOptions level_options = buildLevelOptions(options, *ground.globe, block_frame, plan.max_zoom, 0, clusters);
+        level_options.coarser_levels = static_cast<std::int32_t>(block_levels);
+        std::vector<Level> levels = buildBlockLevels(ground, std::move(tin), level_options);
+        if (levels.size() != block_levels + 1) {
+          throw Error(ErrorCode::Internal, "block " + std::to_string(i) + ", " + std::to_string(j) + " made " +
+                                               std::to_string(levels.size()) + " levels; expected " +
+                                               std::to_string(block_levels + 1));
+        }
+        std::vector<TileKey> cluster_tiles;
+        std::vector<ZoomToWrite> zooms =
+            assignZooms(options, block_frame, levels, block_levels, plan.max_zoom, cluster_tiles, steps);
+        std::vector<const std::vector<std::uint32_t>*> maps;
+        for (std::size_t l = 0; l < block_levels; ++l) maps.push_back(&levels[l].index_in_coarser);
+        chainSteps(zooms, maps, &levels[block_levels].mesh, top_step);
+        // A vertex on the block's outline is shared with the neighbouring block: its normal
+        // from the pixels around it, which both blocks hold.
+        const PixelWindow& window = ground.window;
+        const double c0 = static_cast<double>(grid.cols[i] - window.col0), c1 = static_cast<double>(grid.cols[i + 1] - window.col0);
+        const double r0 = static_cast<double>(grid.rows[j] - window.row0), r1 = static_cast<double>(grid.rows[j + 1] - window.row0);
+        const DemOnGlobe& globe = *ground.globe;
+        const auto fixNormals = [&](const TinMesh& mesh, std::vector<FloatNormal>& normals) {
+          for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+            const GridPoint& p = mesh.vertices[v];
+            const bool on_column = (p.col == c0 || p.col == c1) && p.row == std::round(p.row);
+            const bool on_row = (p.row == r0 || p.row == r1) && p.col == std::round(p.col);
+            if (on_column || on_row) {
+              normals[v] = pixelNormal(globe, static_cast<std::int32_t>(p.col), static_cast<std::int32_t>(p.row));
+            }
+          }
+        };
+        handover.written = writeZooms(zooms, globe, nullptr, glb, options.implicit_tiling, output, fixNormals, true,
+                                      window.col0, window.row0);
+        Level& last = levels[block_levels];
+        handover.level = std::move(last.mesh);
+        handover.inherited = std::move(last.inherited_partition.cluster_of_face);
+        handover.cluster_tiles = std::move(cluster_tiles);
+      }
+      writeHandoverFile(handover, blockPath(i, j, ".build"));
+      std::filesystem::remove(blockPath(i, j, ".tin"), ec);
+      shown.advance();
+    }
+    shown.endStage();
+  } catch (...) {
+    failure = std::current_exception();
+  }
+  Ranks::meet(failure);
+  if (!leader) return {};
+  std::string blocks_said = std::to_string(block_count) + " (" + std::to_string(grid.columnCount()) + " x " +
+                           std::to_string(grid.rowCount()) + " tiles of zoom " + std::to_string(block_zoom) +
+                           ", at most " + std::to_string(block_pixels) + " px a side" +
+                           (ranks > 1 ? ", on " + std::to_string(ranks) + " ranks" : std::string()) + ") wrote zooms " +
+                           std::to_string(block_zoom + 1) + " to " + std::to_string(plan.max_zoom) +
+                           (resumed_tins > 0 ? "; resumed: of rank 0's " + std::to_string(mine) + " blocks, " +
+                                                   std::to_string(resumed_tins) + " had their TIN and " +
+                                                   std::to_string(resumed_blocks) + " their levels and tiles already"
+                                             : std::string());
+  progress.note("blocks: " + blocks_said);
+
+  // 3. The levels at Zb stitched into one mesh: the finest level of the rest.
+  progress.beginStage("joining the blocks' levels at zoom " + std::to_string(block_zoom), block_count);
+  TinMesh top_mesh;
+  FacePartition top_inherited;
+  std::vector<TileKey> top_cluster_tiles;
+  BlockVertexNumbering numbering;
+  std::vector<DrawnTriangles> drawn_below;  // the blocks' tiles at Zb + 1
+  std::map<std::int32_t, ZoomTally> tallies;
+  std::map<std::tuple<int, int, int>, TileNode> nodes;
+  const auto addNodes = [&](std::vector<TileNode>& list) {
+    for (TileNode& node : list) {
+      const TileKey key = node.key;
+      nodes[{key.zoom, key.y, key.x}] = std::move(node);
+    }
+  };
+  for (std::size_t j = 0; j < grid.rowCount(); ++j) {
+    for (std::size_t i = 0; i < grid.columnCount(); ++i) {
+      BlockHandover h = readHandoverFile(blockPath(i, j, ".build"), options.implicit_tiling);
+      const std::vector<std::uint32_t> numbers =
+          numbering.number(i, j, h.window, h.level.vertices, grid, [&](double col, double row, double height) {
+            top_mesh.vertices.push_back({col, row, height});
+            return static_cast<std::uint32_t>(top_mesh.vertices.size() - 1);
+          });
+      for (const std::uint32_t v : h.level.triangle_indices) top_mesh.triangle_indices.push_back(numbers[v]);
+      const auto offset = static_cast<std::int32_t>(top_cluster_tiles.size());
+      for (const std::int32_t c : h.inherited) top_inherited.cluster_of_face.push_back(offset + c);
+      top_cluster_tiles.insert(top_cluster_tiles.end(), h.cluster_tiles.begin(), h.cluster_tiles.end());
+      for (const auto& [zoom, tally] : h.written.tallies) tallies[zoom].add(tally);
+      addNodes(h.written.nodes);
+      for (DrawnTriangles& t : h.written.coarsest) drawn_below.push_back(std::move(t));
+      progress.advance();
+    }
+  }
+  top_inherited.cluster_count = static_cast<std::int32_t>(top_cluster_tiles.size());
+  progress.endStage();
+
+  const DemGrid dem = readDem(mosaic, "reading the DEM for zooms " + std::to_string(plan.min_zoom) + " to " +
+                                          std::to_string(block_zoom), progress);
+  const DemStatistics stats = computeStatistics(dem);
+  const DemOnGlobe globe(dem, geoid_grid, &progress);
+  TileFrame top_frame(options.scheme, dem);
+  layout.follow(top_frame);
+  const auto top_levels = static_cast<std::size_t>(block_zoom - plan.min_zoom);
+  std::vector<Level> levels;
+  if (top_levels > 0) {
+    std::vector<std::int32_t> clusters(plan.clusters_per_level.begin() + static_cast<std::ptrdiff_t>(block_levels),
+                                       plan.clusters_per_level.end());
+    LevelOptions level_options =
+        buildLevelOptions(options, globe, top_frame, block_zoom, static_cast<std::int32_t>(block_levels), clusters);
+    level_options.coarser_levels = static_cast<std::int32_t>(top_levels);
+    levels = buildLevels(dem, std::move(top_mesh), level_options, {}, progress);
+  } else {
+    levels.emplace_back();
+    levels[0].mesh = std::move(top_mesh);
+  }
+  levels[0].inherited_partition = std::move(top_inherited);
+  progress.beginStage("assigning clusters to tiles", 0);
+  std::vector<ZoomToWrite> zooms =
+      assignZooms(options, top_frame, levels, levels.size(), block_zoom, top_cluster_tiles, top_steps);
+  for (ZoomToWrite& zoom : zooms) zoom.vertex_step.assign(zoom.mesh->vertices.size(), top_step);
+  progress.endStage();
+
+  // The blocks' zoom Zb + 1, drawn again over the whole DEM: what zoom Zb is compared with.
+  progress.beginStage("writing zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(block_zoom), 0);
+  ZoomSurface finer(dem.pixelCount());
+  {
+    const PixelBoxes boxes(globe);
+    tbb::parallel_for(std::size_t{0}, drawn_below.size(), [&](std::size_t k) {
+      const DrawnTriangles& t = drawn_below[k];
+      measureDrawnTile(globe, t.positions, t.grid, t.triangle_indices, t.shift_m, nullptr, &finer, nullptr, &boxes);
+    });
+    drawn_below = {};
+  }
+  WrittenZooms top = writeZooms(zooms, globe, &finer, glb, options.implicit_tiling, output, {}, false, 0, 0);
+  for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;
+  addNodes(top.nodes);
+  progress.endStage();
+
+  // The summary and the tileset.
+  BuildSummary summary;
+  summary.output_dir = options.output_dir;
+  summary.generator = glb.generator;
+  summary.crs_name = dem.crs_name;
+  summary.geoid = geoid ? geoid->name : "none (heights are ellipsoidal)";
+  summary.blocks = blocks_said;
+  const CrsToWgs84 to_wgs84(dem.crs_wkt);
+  summary.placement = to_wgs84.pathDescription();
+  summary.warnings = to_wgs84.warnings();
+  summary.width = dem.width;
+  summary.height = dem.height;
+  summary.pixel_size = dem.pixel_size_x;
+  summary.valid_pixels = stats.valid_pixels;
+  summary.min_height_m = stats.min_height_m;
+  summary.max_height_m = stats.max_height_m;
+  {
+    GeodeticPoint centre;
+    const CrsPoint c = dem.pixelCentre((dem.width - 1) / 2.0, (dem.height - 1) / 2.0);
+    to_wgs84.transform(std::span<const CrsPoint>(&c, 1), std::span<GeodeticPoint>(&centre, 1));
+    summary.centre_lon_deg = centre.lon_deg;
+    summary.centre_lat_deg = centre.lat_deg;
+  }
+  double widest_step_m = 0;
+  for (const auto& [zoom, tally] : tallies) {
+    ZoomSummary z;
+    z.zoom = zoom;
+    z.clusters = tally.clusters;
+    z.tiles = tally.tiles;
+    z.vertices = tally.vertices;
+    z.triangles = tally.triangles;
+    z.tile_triangles = tally.tile_triangles;
+    z.bytes = tally.bytes;
+    z.max_error_m = tally.max_error_m;
+    z.rms_error_m = tally.drawn_pixels ? std::sqrt(tally.sum_squares / static_cast<double>(tally.drawn_pixels)) : 0.0;
+    z.position_step_m = tally.step;
+    z.position_bits = tally.position_bits;
+    widest_step_m = std::max(widest_step_m, tally.step);
+    summary.tiles += z.tiles;
+    summary.triangles += z.triangles;
+    summary.bytes += z.bytes;
+    summary.tile_bytes += z.bytes;
+    if (zoom < plan.max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, z.max_error_m);
+    summary.zooms.push_back(z);
+  }
+  summary.position_step_m = steps.at(plan.max_zoom);
+  writeTilesetOutput(std::move(nodes), options, dem.crs_name, geoid.has_value(), widest_step_m, summary, output,
+                     progress);
+  if (options.report) {
+    progress.note("report: not written for a build in blocks yet; `terratiles check " + options.output_dir +
+                  "` checks the output");
+  }
+  progress.throwIfCancelled();
+  progress.beginStage("moving the output into place", 0);
+  output.commit();
+  std::error_code ec;
+  std::filesystem::remove_all(blocks_dir, ec);
+  progress.endStage();
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+}  // namespace terratiles
