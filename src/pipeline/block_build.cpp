@@ -15,6 +15,10 @@
 #include <optional>
 #include <tuple>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 #include <nlohmann/json.hpp>
 
 #include "formats/geoid/read_geoid.h"
@@ -334,6 +338,11 @@ struct DrawnTriangles {
   double shift_m = 0;
 };
 
+// A tile's error over the strips it was measured in.
+struct DrawTileMeasureSum {
+  double max_error_m = 0, finer_difference_m = 0;
+};
+
 struct WrittenZooms {
   std::map<std::int32_t, ZoomTally> tallies;
   std::vector<TileNode> nodes;
@@ -342,10 +351,10 @@ struct WrittenZooms {
 
 // Draws, measures, encodes and writes `zooms` (finest first) against `globe`: as the whole
 // build does, each tile's error against the DEM pixels under it and against the next finer
-// zoom's drawn surface (for the first zoom: `finer`, when not null). `normals_fix` may replace
+// zoom's drawn surface (for the first zoom: `finer_surface`, when not null; taken). `normals_fix` may replace
 // level normals (blocks: their border vertices'). `keep_coarsest`: the last zoom's drawn
 // triangles are returned, grid positions moved by (col0, row0) into the mosaic's pixels.
-WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe, const ZoomSurface* finer,
+WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe, ZoomSurface* finer_surface,
                         const GlbOptions& glb_base, bool implicit_tiling, OutputDirectory& output,
                         const std::function<void(const TinMesh&, std::vector<FloatNormal>&)>& normals_fix,
                         bool keep_coarsest, std::int64_t col0, std::int64_t row0) {
@@ -353,7 +362,14 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
   const DemGrid& dem = globe.dem();
   const PixelBoxes boxes(globe);
   tbb::enumerable_thread_specific<ContentScratch> content_scratch;
+  // Two surfaces in turn: the zoom's own and the finer one's (the first zoom's finer one is
+  // `finer_surface`, whose memory then serves the second zoom).
   std::array<ZoomSurface, 2> surfaces;
+  const ZoomSurface* finer = nullptr;
+  if (finer_surface) {
+    surfaces[1] = std::move(*finer_surface);
+    finer = &surfaces[1];
+  }
   for (std::size_t k = 0; k < zooms.size(); ++k) {
     ZoomToWrite& zoom = zooms[k];
     const TinMesh& mesh = *zoom.mesh;
@@ -434,6 +450,181 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
     }
     finer = &surface;
   }
+  return out;
+}
+
+// The zooms from the blocks' zoom up (finest first; `finer_drawn`: the drawn triangles of the
+// zoom below the first, the blocks'), measured against the DEM strip by strip: each strip of
+// rows is read with every row a triangle of these zooms can reach from it (the tallest
+// triangle's rows above and below), placed on the globe, and every tile drawn over it; a
+// tile's error is the largest over the strips, each pixel counted (for the RMS) in its own
+// strip. Memory: one window of the mosaic of about `window_pixels` (28 bytes per pixel; more
+// where the tallest triangle's rows need it) and the zooms' drawn triangles,
+// whatever the mosaic's size. The contents are made first on `globe` (the whole DEM, which the
+// caller may then let go through `release`).
+WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, std::vector<DrawnTriangles> finer_drawn,
+                                const DemOnGlobe& globe, const std::function<void()>& release, const DemMosaic& mosaic,
+                                const GeoidGrid* geoid, std::int64_t window_pixels, const GlbOptions& glb_base,
+                                bool implicit_tiling, OutputDirectory& output, DemStatistics& stats, Progress& progress) {
+  WrittenZooms out;
+  struct ZoomTiles {
+    std::vector<DrawnContent> contents;
+    std::vector<DrawTileMeasureSum> measures;
+    double shift_m = 0;
+  };
+  std::vector<ZoomTiles> drawn(zooms.size());
+  tbb::enumerable_thread_specific<ContentScratch> content_scratch;
+  for (std::size_t k = 0; k < zooms.size(); ++k) {
+    ZoomToWrite& zoom = zooms[k];
+    const TinMesh& mesh = *zoom.mesh;
+    std::vector<EcefPoint> snapped(mesh.vertices.size());
+    globe.place(mesh.vertices, {}, snapped);
+    const std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
+    double largest_step = zoom.step;
+    for (std::size_t v = 0; v < snapped.size(); ++v) {
+      const double step = zoom.vertex_step[v];
+      largest_step = std::max(largest_step, step);
+      EcefPoint& p = snapped[v];
+      p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
+    }
+    drawn[k].shift_m = 0.87 * largest_step;
+    drawn[k].contents.resize(zoom.tiles.size());
+    drawn[k].measures.resize(zoom.tiles.size());
+    tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
+      drawn[k].contents[i] = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
+    });
+  }
+  if (release) release();
+
+  // The rows every triangle spans, and each tile's, in mosaic rows.
+  const auto rowsOf = [](const std::vector<GridCorner>& grid, const std::vector<std::uint32_t>& indices,
+                         std::int64_t& tallest) {
+    double low = 1e300, high = -1e300;
+    for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+      double a = 1e300, b = -1e300;
+      for (std::size_t c = 0; c < 3; ++c) {
+        a = std::min(a, grid[indices[t + c]].row);
+        b = std::max(b, grid[indices[t + c]].row);
+      }
+      tallest = std::max(tallest, static_cast<std::int64_t>(std::ceil(b - a)));
+      low = std::min(low, a);
+      high = std::max(high, b);
+    }
+    return std::array<double, 2>{low, high};
+  };
+  std::int64_t tallest = 0;
+  std::vector<std::array<double, 2>> finer_rows(finer_drawn.size());
+  for (std::size_t i = 0; i < finer_drawn.size(); ++i) finer_rows[i] = rowsOf(finer_drawn[i].grid, finer_drawn[i].triangle_indices, tallest);
+  std::vector<std::vector<std::array<double, 2>>> tile_rows(zooms.size());
+  for (std::size_t k = 0; k < zooms.size(); ++k) {
+    for (const DrawnContent& c : drawn[k].contents) tile_rows[k].push_back(rowsOf(c.grid, c.triangle_indices, tallest));
+  }
+  const std::int64_t width = mosaic.width, height = mosaic.height;
+  const std::int64_t reach = tallest + 2;
+  const std::int64_t strip_rows = std::max<std::int64_t>(16, window_pixels / std::max<std::int64_t>(width, 1) - 2 * reach);
+  std::vector<ZoomTally> tallies(zooms.size());
+  stats = DemStatistics();
+  float low_height = std::numeric_limits<float>::infinity(), high_height = -low_height;
+  progress.beginStage("measuring zooms " + std::to_string(zooms.back().zoom) + " to " + std::to_string(zooms.front().zoom) +
+                          " strip by strip",
+                      static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
+  for (std::int64_t r0 = 0; r0 < height; r0 += strip_rows) {
+    const std::int64_t r1 = std::min(height, r0 + strip_rows);
+    const std::int64_t w0 = std::max<std::int64_t>(0, r0 - reach), w1 = std::min(height, r1 + reach);
+    const DemGrid window = readDemWindow(mosaic, {0, w0, static_cast<std::int32_t>(width), static_cast<std::int32_t>(w1 - w0)});
+    for (std::int64_t row = r0 - w0; row < r1 - w0; ++row) {
+      for (std::int64_t col = 0; col < width; ++col) {
+        const float h = window.heightAt(static_cast<std::int32_t>(col), static_cast<std::int32_t>(row));
+        if (std::isnan(h)) continue;
+        ++stats.valid_pixels;
+        low_height = std::min(low_height, h);
+        high_height = std::max(high_height, h);
+      }
+    }
+    const DemOnGlobe strip(window, geoid, nullptr);
+    const PixelBoxes boxes(strip);
+    const auto inWindow = [&](const std::array<double, 2>& rows) {
+      return rows[1] >= static_cast<double>(w0) - 1 && rows[0] <= static_cast<double>(w1);
+    };
+    // Grid positions in the window's rows.
+    const auto shifted = [&](const std::vector<GridCorner>& grid) {
+      std::vector<GridCorner> moved = grid;
+      for (GridCorner& g : moved) g.row -= static_cast<double>(w0);
+      return moved;
+    };
+    std::array<ZoomSurface, 2> surfaces{ZoomSurface(window.pixelCount()), ZoomSurface(window.pixelCount())};
+    tbb::parallel_for(std::size_t{0}, finer_drawn.size(), [&](std::size_t i) {
+      if (!inWindow(finer_rows[i])) return;
+      const DrawnTriangles& t = finer_drawn[i];
+      measureDrawnTile(strip, t.positions, shifted(t.grid), t.triangle_indices, t.shift_m, nullptr, &surfaces[1], nullptr,
+                       &boxes);
+    });
+    for (std::size_t k = 0; k < zooms.size(); ++k) {
+      ZoomSurface& surface = surfaces[k % 2];
+      const ZoomSurface& finer = surfaces[(k + 1) % 2];
+      if (k > 0) surface.clear();
+      tbb::parallel_for(std::size_t{0}, drawn[k].contents.size(), [&](std::size_t i) {
+        if (!inWindow(tile_rows[k][i])) return;
+        const DrawnContent& c = drawn[k].contents[i];
+        const DrawnTileMeasure m = measureDrawnTile(strip, c.positions, shifted(c.grid), c.triangle_indices,
+                                                    drawn[k].shift_m, &finer, &surface, nullptr, &boxes);
+        DrawTileMeasureSum& sum = drawn[k].measures[i];
+        sum.max_error_m = std::max(sum.max_error_m, m.max_error_m);
+        sum.finer_difference_m = std::max(sum.finer_difference_m, m.finer_difference_m);
+      });
+      for (std::int64_t row = r0 - w0; row < r1 - w0; ++row) {
+        for (std::int64_t col = 0; col < width; ++col) {
+          const std::size_t p = static_cast<std::size_t>(row * width + col);
+          if (!surface.drawn(p)) continue;
+          tallies[k].sum_squares += surface.error(p) * surface.error(p);
+          ++tallies[k].drawn_pixels;
+        }
+      }
+    }
+    progress.advance();
+  }
+  progress.endStage();
+  if (stats.valid_pixels > 0) {
+    stats.min_height_m = low_height;
+    stats.max_height_m = high_height;
+  }
+
+  progress.beginStage("writing zooms " + std::to_string(zooms.back().zoom) + " to " + std::to_string(zooms.front().zoom), 0);
+  for (std::size_t k = 0; k < zooms.size(); ++k) {
+    const ZoomToWrite& zoom = zooms[k];
+    GlbOptions glb = glb_base;
+    glb.position_step_m = zoom.step;
+    std::vector<std::vector<std::uint8_t>> bytes(zoom.tiles.size());
+    std::vector<Region> regions(zoom.tiles.size());
+    std::vector<int> bits(zoom.tiles.size());
+    tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
+      const DrawnContent& c = drawn[k].contents[i];
+      regions[i] = drawnRegion(c.positions, c.triangle_indices);
+      bytes[i] = encodeContent(c, glb, &bits[i]);
+    });
+    ZoomTally& tally = tallies[k];
+    tally.step = zoom.step;
+    tally.clusters = zoom.clusters;
+    tally.tiles = zoom.tiles.size();
+    tally.vertices = zoom.mesh->vertices.size();
+    tally.triangles = zoom.mesh->triangleCount();
+    for (std::size_t i = 0; i < zoom.tiles.size(); ++i) {
+      const PyramidTile& tile = zoom.tiles[i];
+      const DrawTileMeasureSum& m = drawn[k].measures[i];
+      tally.tile_triangles += tile.triangleCount();
+      tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), bytes[i]);
+      tally.max_error_m = std::max(tally.max_error_m, m.max_error_m);
+      tally.position_bits = std::max(tally.position_bits, bits[i]);
+      TileNode node;
+      node.key = tile.key;
+      node.content_uri = contentUri(tile.key, implicit_tiling);
+      node.region = regions[i];
+      node.geometric_error_m = roundUpToMicrometre(std::max(m.max_error_m, m.finer_difference_m));
+      out.nodes.push_back(std::move(node));
+    }
+    out.tallies[zoom.zoom] = tally;
+  }
+  progress.endStage();
   return out;
 }
 
@@ -676,6 +867,10 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   if (!options.constraints.empty()) refuse("--constraints");
   if (options.draco_position_bits > 0) refuse("--draco-position-bits");
   if (options.max_zoom >= 0) refuse("--max-zoom");
+  if (options.strip_pixels <= 0) {
+    throw Error(ErrorCode::Usage, "--strip-pixels is " + std::to_string(options.strip_pixels) +
+                                      ", expected a positive number of pixels per strip (default 16000000)");
+  }
   const bool leader = Ranks::rank() == 0;
   const auto ranks = static_cast<std::size_t>(Ranks::size()), rank = static_cast<std::size_t>(Ranks::rank());
   Progress quiet_progress;
@@ -705,28 +900,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   if (leader) {
     try {
       OutputDirectory check_target(options.output_dir, options.force, OutputDirectory::KeptStaging{staging});  // refuses a wrong target first
-      const std::filesystem::path manifest_path = blocks_dir / "manifest.json";
-      std::error_code ec;
-      bool keep = false;
-      if (std::filesystem::exists(manifest_path, ec)) {
-        std::ifstream in(manifest_path);
-        const nlohmann::json found = nlohmann::json::parse(in, nullptr, false);
-        if (options.resume && found != manifest) {
-          throw Error(ErrorCode::Usage, blocks_dir.string() + " holds the blocks of another build (other inputs, "
-                                        "options or version); run without --resume to start again");
-        }
-        keep = options.resume;
-        if (!keep) shown.note("an interrupted build's blocks in " + blocks_dir.string() + " were dropped (--resume continues them)");
-      }
-      if (!keep) {
-        std::filesystem::remove_all(blocks_dir, ec);
-        std::filesystem::create_directories(staging, ec);
-        if (ec) {
-          throw Error(ErrorCode::Output, blocks_dir.string() + ": cannot create the folder of the block files (" +
-                                             ec.message() + "); check that the output's folder is writable");
-        }
-        writeRecordFile(manifest_path.string(), manifest.dump(2) + "\n");
-      }
+      prepareBlocksFolder(blocks_dir, manifest.dump(2) + "\n", options.resume, "output", "build", shown);
     } catch (...) {
       failure = std::current_exception();
     }
@@ -744,47 +918,54 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   tin_options.max_error_m = options.tin_max_error_m;
   tin_options.geoid = geoid_grid;
   tin_options.measure = false;
-  shown.beginStage("TIN in " + std::to_string(block_count) + " blocks" +
-                       (ranks > 1 ? ", " + std::to_string(mine) + " on rank 0 of " + std::to_string(ranks) : std::string()),
-                   mine);
-  try {
-    for (std::size_t b = rank; b < block_count; b += ranks) {
-      const std::size_t i = b % grid.columnCount(), j = b / grid.columnCount();
-      std::error_code ec;
-      const bool done = std::filesystem::exists(blockPath(i, j, ".tin"), ec) ||
-                        std::filesystem::exists(blockPath(i, j, ".build"), ec);
-      if (!(options.resume && done)) {
-        const BlockTin tin = buildBlockTin(mosaic, grid, i, j, tin_options);
-        BlockStats stats;
-        if (tin.mesh.triangleCount() > 0) {
-          stats.triangles = tin.mesh.triangleCount();
-          DemGrid window = mosaicFrameGrid(mosaic);
-          window.col_offset = tin.window.col0;
-          window.row_offset = tin.window.row0;
-          window.width = tin.window.width;
-          window.height = tin.window.height;
-          window.origin_x = mosaic.origin_x + static_cast<double>(tin.window.col0) * mosaic.pixel_size;
-          window.origin_y = mosaic.origin_y - static_cast<double>(tin.window.row0) * mosaic.pixel_size;
-          TileFrame block_frame(options.scheme, window, &extent);
-          layout.follow(block_frame);
-          stats.box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
-          for (const GridPoint& p : tin.mesh.vertices) {
-            stats.low_m = std::min(stats.low_m, p.height_m);
-            stats.high_m = std::max(stats.high_m, p.height_m);
-          }
-        }
-        writeStatsFile(stats, blockPath(i, j, ".stats"));  // before the TIN: a TIN file means both are whole
-        writeBlockTinFile(tin, blockPath(i, j, ".tin"));
-      } else {
-        ++resumed_tins;
+  // Runs `work(i, j, b)` for every block b of this rank (rank b mod N) as a stage of `shown`;
+  // the ranks meet after it, so one rank's failure stops them all.
+  const auto forMyBlocks = [&](const std::string& stage,
+                               const std::function<void(std::size_t, std::size_t, std::size_t)>& work) {
+    shown.beginStage(stage + " in " + std::to_string(block_count) + " blocks" +
+                         (ranks > 1 ? ", " + std::to_string(mine) + " on rank 0 of " + std::to_string(ranks) : std::string()),
+                     mine);
+    std::exception_ptr failed;
+    try {
+      for (std::size_t b = rank; b < block_count; b += ranks) {
+        work(b % grid.columnCount(), b / grid.columnCount(), b);
+        shown.advance();
       }
-      shown.advance();
+      shown.endStage();
+    } catch (...) {
+      failed = std::current_exception();
     }
-    shown.endStage();
-  } catch (...) {
-    failure = std::current_exception();
-  }
-  Ranks::meet(failure);
+    Ranks::meet(failed);
+  };
+  forMyBlocks("TIN", [&](std::size_t i, std::size_t j, std::size_t) {
+    std::error_code ec;
+    if (options.resume && (std::filesystem::exists(blockPath(i, j, ".tin"), ec) ||
+                           std::filesystem::exists(blockPath(i, j, ".build"), ec))) {
+      ++resumed_tins;
+      return;
+    }
+    const BlockTin tin = buildBlockTin(mosaic, grid, i, j, tin_options);
+    BlockStats stats;
+    if (tin.mesh.triangleCount() > 0) {
+      stats.triangles = tin.mesh.triangleCount();
+      DemGrid window = mosaicFrameGrid(mosaic);
+      window.col_offset = tin.window.col0;
+      window.row_offset = tin.window.row0;
+      window.width = tin.window.width;
+      window.height = tin.window.height;
+      window.origin_x = mosaic.origin_x + static_cast<double>(tin.window.col0) * mosaic.pixel_size;
+      window.origin_y = mosaic.origin_y - static_cast<double>(tin.window.row0) * mosaic.pixel_size;
+      TileFrame block_frame(options.scheme, window, &extent);
+      layout.follow(block_frame);
+      stats.box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
+      for (const GridPoint& p : tin.mesh.vertices) {
+        stats.low_m = std::min(stats.low_m, p.height_m);
+        stats.high_m = std::max(stats.high_m, p.height_m);
+      }
+    }
+    writeStatsFile(stats, blockPath(i, j, ".stats"));  // before the TIN: a TIN file means both are whole
+    writeBlockTinFile(tin, blockPath(i, j, ".tin"));
+  });
 
   // The zooms, from every block's figures (every rank alike).
   std::size_t finest_triangles = 0;
@@ -836,80 +1017,68 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   // 2. Every block's levels down to Zb, its tiles of the zooms below Zb written, what it hands
   // over kept as a file (written last: one that exists is whole, and so are the block's tiles).
   const auto block_levels = static_cast<std::size_t>(plan.max_zoom - block_zoom);
-  shown.beginStage("levels and tiles in " + std::to_string(block_count) + " blocks" +
-                       (ranks > 1 ? ", " + std::to_string(mine) + " on rank 0 of " + std::to_string(ranks) : std::string()),
-                   mine);
-  try {
-    for (std::size_t b = rank; b < block_count; b += ranks) {
-      const std::size_t i = b % grid.columnCount(), j = b / grid.columnCount();
-      std::error_code ec;
-      if (options.resume && std::filesystem::exists(blockPath(i, j, ".build"), ec)) {
-        ++resumed_blocks;
-        shown.advance();
-        continue;
-      }
-      BlockTin tin = readBlockTinFile(blockPath(i, j, ".tin"));
-      BlockHandover handover;
-      handover.column = i;
-      handover.row = j;
-      handover.window = tin.window;
-      if (tin.mesh.triangleCount() > 0) {
-        const BlockGround ground = readBlock(mosaic, grid, i, j, geoid_grid);
-        TileFrame block_frame(options.scheme, ground.dem, &extent);
-        layout.follow(block_frame);
-        block_frame.keepInside(layout.keys[b]);
-        const TileBounds box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
-        std::vector<std::int32_t> clusters;
-        for (std::int32_t z = plan.max_zoom; z > block_zoom; --z) {
-          clusters.push_back(options.clusters_per_tile *
-                             static_cast<std::int32_t>(block_frame.tilesIntersecting(box, z).size()));
-        }
-        LevelOptions level_options = buildLevelOptions(options, *ground.globe, block_frame, plan.max_zoom, 0, clusters);
-        level_options.coarser_levels = static_cast<std::int32_t>(block_levels);
-        std::vector<Level> levels = buildBlockLevels(ground, std::move(tin), level_options);
-        if (levels.size() != block_levels + 1) {
-          throw Error(ErrorCode::Internal, "block " + std::to_string(i) + ", " + std::to_string(j) + " made " +
-                                               std::to_string(levels.size()) + " levels; expected " +
-                                               std::to_string(block_levels + 1));
-        }
-        std::vector<TileKey> cluster_tiles;
-        std::vector<ZoomToWrite> zooms =
-            assignZooms(options, block_frame, levels, block_levels, plan.max_zoom, cluster_tiles, steps);
-        std::vector<const std::vector<std::uint32_t>*> maps;
-        for (std::size_t l = 0; l < block_levels; ++l) maps.push_back(&levels[l].index_in_coarser);
-        chainSteps(zooms, maps, &levels[block_levels].mesh, top_step);
-        // A vertex on the block's outline is shared with the neighbouring block: its normal
-        // from the pixels around it, which both blocks hold.
-        const PixelWindow& window = ground.window;
-        const double c0 = static_cast<double>(grid.cols[i] - window.col0), c1 = static_cast<double>(grid.cols[i + 1] - window.col0);
-        const double r0 = static_cast<double>(grid.rows[j] - window.row0), r1 = static_cast<double>(grid.rows[j + 1] - window.row0);
-        const DemOnGlobe& globe = *ground.globe;
-        const auto fixNormals = [&](const TinMesh& mesh, std::vector<FloatNormal>& normals) {
-          for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
-            const GridPoint& p = mesh.vertices[v];
-            const bool on_column = (p.col == c0 || p.col == c1) && p.row == std::round(p.row);
-            const bool on_row = (p.row == r0 || p.row == r1) && p.col == std::round(p.col);
-            if (on_column || on_row) {
-              normals[v] = pixelNormal(globe, static_cast<std::int32_t>(p.col), static_cast<std::int32_t>(p.row));
-            }
-          }
-        };
-        handover.written = writeZooms(zooms, globe, nullptr, glb, options.implicit_tiling, output, fixNormals, true,
-                                      window.col0, window.row0);
-        Level& last = levels[block_levels];
-        handover.level = std::move(last.mesh);
-        handover.inherited = std::move(last.inherited_partition.cluster_of_face);
-        handover.cluster_tiles = std::move(cluster_tiles);
-      }
-      writeHandoverFile(handover, blockPath(i, j, ".build"));
-      std::filesystem::remove(blockPath(i, j, ".tin"), ec);
-      shown.advance();
+  forMyBlocks("levels and tiles", [&](std::size_t i, std::size_t j, std::size_t b) {
+    std::error_code ec;
+    if (options.resume && std::filesystem::exists(blockPath(i, j, ".build"), ec)) {
+      ++resumed_blocks;
+      return;
     }
-    shown.endStage();
-  } catch (...) {
-    failure = std::current_exception();
-  }
-  Ranks::meet(failure);
+    BlockTin tin = readBlockTinFile(blockPath(i, j, ".tin"));
+    BlockHandover handover;
+    handover.column = i;
+    handover.row = j;
+    handover.window = tin.window;
+    if (tin.mesh.triangleCount() > 0) {
+      const BlockGround ground = readBlock(mosaic, grid, i, j, geoid_grid);
+      TileFrame block_frame(options.scheme, ground.dem, &extent);
+      layout.follow(block_frame);
+      block_frame.keepInside(layout.keys[b]);
+      const TileBounds box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
+      std::vector<std::int32_t> clusters;
+      for (std::int32_t z = plan.max_zoom; z > block_zoom; --z) {
+        clusters.push_back(options.clusters_per_tile *
+                           static_cast<std::int32_t>(block_frame.tilesIntersecting(box, z).size()));
+      }
+      LevelOptions level_options = buildLevelOptions(options, *ground.globe, block_frame, plan.max_zoom, 0, clusters);
+      level_options.coarser_levels = static_cast<std::int32_t>(block_levels);
+      std::vector<Level> levels = buildBlockLevels(ground, std::move(tin), level_options);
+      if (levels.size() != block_levels + 1) {
+        throw Error(ErrorCode::Internal, "block " + std::to_string(i) + ", " + std::to_string(j) + " made " +
+                                             std::to_string(levels.size()) + " levels; expected " +
+                                             std::to_string(block_levels + 1));
+      }
+      std::vector<TileKey> cluster_tiles;
+      std::vector<ZoomToWrite> zooms =
+          assignZooms(options, block_frame, levels, block_levels, plan.max_zoom, cluster_tiles, steps);
+      std::vector<const std::vector<std::uint32_t>*> maps;
+      for (std::size_t l = 0; l < block_levels; ++l) maps.push_back(&levels[l].index_in_coarser);
+      chainSteps(zooms, maps, &levels[block_levels].mesh, top_step);
+      // A vertex on the block's outline is shared with the neighbouring block: its normal
+      // from the pixels around it, which both blocks hold.
+      const PixelWindow& window = ground.window;
+      const double c0 = static_cast<double>(grid.cols[i] - window.col0), c1 = static_cast<double>(grid.cols[i + 1] - window.col0);
+      const double r0 = static_cast<double>(grid.rows[j] - window.row0), r1 = static_cast<double>(grid.rows[j + 1] - window.row0);
+      const DemOnGlobe& globe = *ground.globe;
+      const auto fixNormals = [&](const TinMesh& mesh, std::vector<FloatNormal>& normals) {
+        for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+          const GridPoint& p = mesh.vertices[v];
+          const bool on_column = (p.col == c0 || p.col == c1) && p.row == std::round(p.row);
+          const bool on_row = (p.row == r0 || p.row == r1) && p.col == std::round(p.col);
+          if (on_column || on_row) {
+            normals[v] = pixelNormal(globe, static_cast<std::int32_t>(p.col), static_cast<std::int32_t>(p.row));
+          }
+        }
+      };
+      handover.written = writeZooms(zooms, globe, nullptr, glb, options.implicit_tiling, output, fixNormals, true,
+                                    window.col0, window.row0);
+      Level& last = levels[block_levels];
+      handover.level = std::move(last.mesh);
+      handover.inherited = std::move(last.inherited_partition.cluster_of_face);
+      handover.cluster_tiles = std::move(cluster_tiles);
+    }
+    writeHandoverFile(handover, blockPath(i, j, ".build"));
+    std::filesystem::remove(blockPath(i, j, ".tin"), ec);
+  });
   if (!leader) return {};
   std::string blocks_said = std::to_string(block_count) + " (" + std::to_string(grid.columnCount()) + " x " +
                            std::to_string(grid.rowCount()) + " tiles of zoom " + std::to_string(block_zoom) +
@@ -958,11 +1127,16 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   top_inherited.cluster_count = static_cast<std::int32_t>(top_cluster_tiles.size());
   progress.endStage();
 
-  const DemGrid dem = readDem(mosaic, "reading the DEM for zooms " + std::to_string(plan.min_zoom) + " to " +
-                                          std::to_string(block_zoom), progress);
-  const DemStatistics stats = computeStatistics(dem);
-  const DemOnGlobe globe(dem, geoid_grid, &progress);
-  TileFrame top_frame(options.scheme, dem);
+  // The whole DEM on the globe while the coarse levels are simplified under their budgets and
+  // their tiles' contents made; let go before they are measured strip by strip.
+  std::optional<DemGrid> dem_storage = readDem(
+      mosaic, "reading the DEM for zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(block_zoom), progress);
+  const DemGrid& dem = *dem_storage;
+  const DemGrid dem_header = mosaicFrameGrid(mosaic);
+  std::optional<DemOnGlobe> globe_storage;
+  globe_storage.emplace(dem, geoid_grid, &progress);
+  const DemOnGlobe& globe = *globe_storage;
+  TileFrame top_frame(options.scheme, dem_header);
   layout.follow(top_frame);
   const auto top_levels = static_cast<std::size_t>(block_zoom - plan.min_zoom);
   std::vector<Level> levels;
@@ -984,45 +1158,25 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   for (ZoomToWrite& zoom : zooms) zoom.vertex_step.assign(zoom.mesh->vertices.size(), top_step);
   progress.endStage();
 
-  // The blocks' zoom Zb + 1, drawn again over the whole DEM: what zoom Zb is compared with.
-  progress.beginStage("writing zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(block_zoom), 0);
-  ZoomSurface finer(dem.pixelCount());
-  {
-    const PixelBoxes boxes(globe);
-    tbb::parallel_for(std::size_t{0}, drawn_below.size(), [&](std::size_t k) {
-      const DrawnTriangles& t = drawn_below[k];
-      measureDrawnTile(globe, t.positions, t.grid, t.triangle_indices, t.shift_m, nullptr, &finer, nullptr, &boxes);
-    });
-    drawn_below = {};
-  }
-  WrittenZooms top = writeZooms(zooms, globe, &finer, glb, options.implicit_tiling, output, {}, false, 0, 0);
+  DemStatistics stats;
+  const auto release = [&] {
+    globe_storage.reset();
+    dem_storage.reset();
+#if defined(__GLIBC__)
+    malloc_trim(0);
+#endif
+  };
+  WrittenZooms top = writeZoomsInStrips(zooms, std::move(drawn_below), globe, release, mosaic, geoid_grid,
+                                        options.strip_pixels, glb, options.implicit_tiling, output, stats, progress);
   for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;
   addNodes(top.nodes);
-  progress.endStage();
 
   // The summary and the tileset.
   BuildSummary summary;
   summary.output_dir = options.output_dir;
   summary.generator = glb.generator;
-  summary.crs_name = dem.crs_name;
-  summary.geoid = geoid ? geoid->name : "none (heights are ellipsoidal)";
   summary.blocks = blocks_said;
-  const CrsToWgs84 to_wgs84(dem.crs_wkt);
-  summary.placement = to_wgs84.pathDescription();
-  summary.warnings = to_wgs84.warnings();
-  summary.width = dem.width;
-  summary.height = dem.height;
-  summary.pixel_size = dem.pixel_size_x;
-  summary.valid_pixels = stats.valid_pixels;
-  summary.min_height_m = stats.min_height_m;
-  summary.max_height_m = stats.max_height_m;
-  {
-    GeodeticPoint centre;
-    const CrsPoint c = dem.pixelCentre((dem.width - 1) / 2.0, (dem.height - 1) / 2.0);
-    to_wgs84.transform(std::span<const CrsPoint>(&c, 1), std::span<GeodeticPoint>(&centre, 1));
-    summary.centre_lon_deg = centre.lon_deg;
-    summary.centre_lat_deg = centre.lat_deg;
-  }
+  describeInput(summary, dem_header, stats, CrsToWgs84(mosaic.crs_wkt), geoid ? geoid->name : std::string());
   double widest_step_m = 0;
   for (const auto& [zoom, tally] : tallies) {
     ZoomSummary z;
@@ -1046,7 +1200,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     summary.zooms.push_back(z);
   }
   summary.position_step_m = steps.at(plan.max_zoom);
-  writeTilesetOutput(std::move(nodes), options, dem.crs_name, geoid.has_value(), widest_step_m, summary, output,
+  writeTilesetOutput(std::move(nodes), options, mosaic.crs_name, geoid.has_value(), widest_step_m, summary, output,
                      progress);
   if (options.report) {
     progress.note("report: not written for a build in blocks yet; `terratiles check " + options.output_dir +

@@ -123,6 +123,29 @@ constexpr char kBlockMagic[8] = {'T', 'T', 'B', 'L', 'O', 'C', 'K', '1'};
 
 }  // namespace
 
+void prepareBlocksFolder(const std::filesystem::path& dir, const std::string& manifest, bool resume,
+                         const std::string& inside, const std::string& run, Progress& progress) {
+  const std::filesystem::path manifest_path = dir / "manifest.json";
+  std::error_code ec;
+  if (std::filesystem::exists(manifest_path, ec)) {
+    if (resume) {
+      if (readRecordFile(manifest_path.string()) != manifest) {
+        throw Error(ErrorCode::Usage, dir.string() + " holds the blocks of another " + run + " (other inputs, options or "
+                                      "version); run without --resume to start again");
+      }
+      return;
+    }
+    progress.note("an interrupted " + run + "'s blocks in " + dir.string() + " were dropped (--resume continues them)");
+  }
+  std::filesystem::remove_all(dir, ec);
+  std::filesystem::create_directories(inside.empty() ? dir : dir / inside, ec);
+  if (ec) {
+    throw Error(ErrorCode::Output, dir.string() + ": cannot create the folder of the block files (" + ec.message() +
+                                       "); check that the output's folder is writable");
+  }
+  writeRecordFile(manifest_path.string(), manifest);
+}
+
 void writeBlockTinFile(const BlockTin& block, const std::string& path) {
   RecordWriter out;
   out.bytes.assign(kBlockMagic, sizeof kBlockMagic);

@@ -13,6 +13,7 @@
 // bit for bit, in both blocks (BlockVertexNumbering stitches on that).
 
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
@@ -94,6 +95,14 @@ BlockTin buildBlockTin(const DemMosaic& mosaic, const BlockGrid& grid, std::size
 // move from level to level as in a whole build; the block borders stay: what they cost is
 // measured by `terratiles levels --block-pixels` against the whole build.
 std::vector<Level> buildBlockLevels(const BlockGround& ground, BlockTin tin, LevelOptions options);
+
+// Rank 0's preparation of the folder of a run in blocks: kept for --resume when its
+// manifest.json holds `manifest` (the inputs and every option the blocks depend on; with
+// --resume and another manifest: Error(Usage), naming `run`, "run" or "build"), else emptied
+// (said on `progress` when it held an interrupted run's blocks) and made again with the
+// manifest and the folder `inside` (empty: none). Error(Output) when it cannot be written.
+void prepareBlocksFolder(const std::filesystem::path& dir, const std::string& manifest, bool resume,
+                         const std::string& inside, const std::string& run, Progress& progress);
 
 // A block's TIN as a file, the unit a resumed or multi-process run keeps and hands over:
 // binary, every number as in memory (doubles bit for bit), written through path + ".tmp" and

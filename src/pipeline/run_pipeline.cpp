@@ -208,24 +208,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   BuildSummary summary;
   summary.output_dir = options.output_dir;
-  summary.crs_name = dem.crs_name;
-  summary.geoid = geoid ? geoid->name : "none (heights are ellipsoidal)";
-  summary.placement = to_wgs84.pathDescription();
-  summary.warnings = to_wgs84.warnings();
-  summary.width = dem.width;
-  summary.height = dem.height;
-  summary.pixel_size = dem.pixel_size_x;
-  summary.valid_pixels = stats.valid_pixels;
-  summary.min_height_m = stats.min_height_m;
-  summary.max_height_m = stats.max_height_m;
-  {
-    GeodeticPoint centre;
-    centre.height_m = (stats.min_height_m + stats.max_height_m) / 2;
-    const CrsPoint c = dem.pixelCentre((dem.width - 1) / 2.0, (dem.height - 1) / 2.0);
-    to_wgs84.transform(std::span<const CrsPoint>(&c, 1), std::span<GeodeticPoint>(&centre, 1));
-    summary.centre_lon_deg = centre.lon_deg;
-    summary.centre_lat_deg = centre.lat_deg;
-  }
+  describeInput(summary, dem, stats, to_wgs84, geoid ? geoid->name : std::string());
 
   // Levels of detail and the triangles of every tile, coarsest zoom first.
   std::vector<ZoomContent> zooms;

@@ -234,6 +234,26 @@ TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes) {
   return root;
 }
 
+void describeInput(BuildSummary& summary, const DemGrid& dem, const DemStatistics& stats, const CrsToWgs84& to_wgs84,
+                   const std::string& geoid_name) {
+  summary.crs_name = dem.crs_name;
+  summary.geoid = !geoid_name.empty() ? geoid_name : "none (heights are ellipsoidal)";
+  summary.placement = to_wgs84.pathDescription();
+  summary.warnings = to_wgs84.warnings();
+  summary.width = dem.width;
+  summary.height = dem.height;
+  summary.pixel_size = dem.pixel_size_x;
+  summary.valid_pixels = stats.valid_pixels;
+  summary.min_height_m = stats.min_height_m;
+  summary.max_height_m = stats.max_height_m;
+  GeodeticPoint centre;
+  centre.height_m = (stats.min_height_m + stats.max_height_m) / 2;
+  const CrsPoint c = dem.pixelCentre((dem.width - 1) / 2.0, (dem.height - 1) / 2.0);
+  to_wgs84.transform(std::span<const CrsPoint>(&c, 1), std::span<GeodeticPoint>(&centre, 1));
+  summary.centre_lon_deg = centre.lon_deg;
+  summary.centre_lat_deg = centre.lat_deg;
+}
+
 void writeTilesetOutput(std::map<std::tuple<int, int, int>, TileNode> nodes, const BuildOptions& options,
                         const std::string& crs_name, bool orthometric, double widest_step_m, BuildSummary& summary,
                         OutputDirectory& output, Progress& progress) {

@@ -15,6 +15,8 @@
 
 #include "formats/gltf/write_glb.h"
 #include "formats/output_directory.h"
+#include "src/dem/dem_grid.h"
+#include "src/geo/crs_transform.h"
 #include "src/geo/dem_on_globe.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/pipeline/drawn_tiles.h"
@@ -85,6 +87,11 @@ std::vector<std::uint8_t> tileOutlineVertices(const TinMesh& mesh, const std::ve
 // Attaches every node under its parent in `nodes`, finest zoom first, creating content-less
 // ancestors where needed, until one node (the common ancestor) is left: the root.
 TileNode buildTree(std::map<std::tuple<int, int, int>, TileNode>& nodes);
+
+// The summary's description of the input: its CRS, size, heights, centre, placement and geoid
+// (`geoid_name`: empty for ellipsoidal heights).
+void describeInput(BuildSummary& summary, const DemGrid& dem, const DemStatistics& stats, const CrsToWgs84& to_wgs84,
+                   const std::string& geoid_name);
 
 // The tileset of the written tiles (`nodes`: (zoom, y, x) -> node with its content, region and
 // geometricError) and build.json (what `terratiles check` needs to find the source again),

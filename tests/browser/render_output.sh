@@ -18,6 +18,9 @@
 #                  the same tile written with --tileset-levels 2: tileset.json holds two
 #                  levels, the rest are external tilesets (tilesets/z/x/y.json) CesiumJS must
 #                  descend into; the same expectations.
+#   gabon_blocks   SRTM Gabon built in blocks of at most 512 px (21 tiles of zoom 10 that write
+#                  zoom 11 on their own; zooms 8-10 from their joined levels): CesiumJS draws
+#                  the blocks' tiles and the coarse zooms alike, and no JSON file passes 16 MiB.
 #   srtm_implicit  SRTM N57E011, geographic, --implicit: CesiumJS must expand the subtrees
 #                  and take every tile's measured error from the tile metadata (without it,
 #                  it halves the root's error per level); the explicit root frames the data,
@@ -50,13 +53,22 @@ case "$case_name" in
     ls "$work/out/tilesets"/*/*/*.json >/dev/null  # the tree was split
     expectations=(--expect-lon 7.872 --expect-lat 46.707 --expect-height 1409.6 --height-tolerance 5)
     ;;
+  gabon_blocks)
+    "$terratiles" build "$data_dir/srtm3_N00E010-E011_4326.tif" -o "$work/out" -q --tin-max-error 20 \
+      --block-pixels 512
+    if [ -n "$(find "$work/out" -name '*.json' -size +16M)" ]; then
+      echo "render_output.sh: a JSON file of the output passes 16 MiB" >&2
+      exit 1
+    fi
+    expectations=(--expect-lon 11.0 --expect-lat 0.5)
+    ;;
   srtm_implicit)
     "$terratiles" build "$data_dir/srtm3_N57E011_4326.tif" -o "$work/out" -q \
       --scheme geographic --implicit --tin-max-error 2
     expectations=(--expect-lon 11.5 --expect-lat 57.5)
     ;;
   *)
-    echo "render_output.sh: unknown case '$case_name'; expected interlaken, interlaken_external, report or srtm_implicit" >&2
+    echo "render_output.sh: unknown case '$case_name'; expected interlaken, interlaken_external, report, gabon_blocks or srtm_implicit" >&2
     exit 2
     ;;
 esac

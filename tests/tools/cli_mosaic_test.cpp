@@ -66,6 +66,18 @@ void buildVrt(const std::string& path, const std::vector<std::string>& sources) 
   GDALClose(vrt);
 }
 
+// SRTM Gabon cut into 8 x 6 GeoTIFFs in dir/pieces and their VRT, dir/pieces.vrt; the pieces.
+std::vector<std::string> gabonPieces(const test::TempDir& dir) {
+  fs::create_directories(dir.path() / "pieces");
+  const std::vector<std::string> pieces =
+      cutIntoPieces(test::sharedData("srtm3_N00E010-E011_4326.tif"), 8, 6, dir.path() / "pieces");
+  REQUIRE(pieces.size() == 48);
+  // gdalbuildvrt recomputes the pixel size (8.3333333333333252e-04 instead of the pieces'
+  // 8.333333333333e-04 degrees): the build reads such a VRT through its sources.
+  buildVrt(dir / "pieces.vrt", pieces);
+  return pieces;
+}
+
 // The tiles and tileset.json of an output (build.json and the report name the inputs).
 std::map<std::string, std::string> tileBytes(const fs::path& out) { return test::filesUnder(out, {"tileset.json", "tiles/"}); }
 
@@ -84,12 +96,7 @@ TEST_SUITE("cli") {
   TEST_CASE("SRTM Gabon cut into 48 files builds the same tiles as one file, from a directory, a list or a VRT") {
     test::TempDir dir;
     const std::string gabon = test::sharedData("srtm3_N00E010-E011_4326.tif");
-    fs::create_directories(dir.path() / "pieces");
-    const std::vector<std::string> pieces = cutIntoPieces(gabon, 8, 6, dir.path() / "pieces");
-    REQUIRE(pieces.size() == 48);
-    // gdalbuildvrt recomputes the pixel size (8.3333333333333252e-04 instead of the pieces'
-    // 8.333333333333e-04 degrees): the build reads such a VRT through its sources.
-    buildVrt(dir / "pieces.vrt", pieces);
+    const std::vector<std::string> pieces = gabonPieces(dir);
     {
       std::ofstream list(dir / "pieces.txt");
       list << "# the pieces, one per line\n\n";
@@ -127,10 +134,7 @@ TEST_SUITE("cli") {
   TEST_CASE("SRTM Gabon cut into 48 files builds in blocks the same tiles as one file and as a VRT, and they check") {
     test::TempDir dir;
     const std::string gabon = test::sharedData("srtm3_N00E010-E011_4326.tif");
-    fs::create_directories(dir.path() / "pieces");
-    const std::vector<std::string> pieces = cutIntoPieces(gabon, 8, 6, dir.path() / "pieces");
-    REQUIRE(pieces.size() == 48);
-    buildVrt(dir / "pieces.vrt", pieces);
+    const std::vector<std::string> pieces = gabonPieces(dir);
     // Blocks of at most 512 px: tiles of zoom 10 (about 420 px), 7 x 3 of them over the
     // raster's 2401 x 1201 px, which write zoom 11 on their own; zooms 8 to 10 are made from
     // their joined levels at zoom 10.
@@ -152,6 +156,9 @@ TEST_SUITE("cli") {
     REQUIRE(whole.size() > 50);
     checkSameBytes(whole, build(pieces, "files"));
     checkSameBytes(whole, build({dir / "pieces.vrt"}, "vrt"));
+    // Zooms 8 to 10 measured against the DEM in strips of about 40 rows (plus the rows their
+    // tallest triangle reaches) instead of the whole raster at once: the same bytes.
+    checkSameBytes(whole, build({gabon, "--strip-pixels", "100000"}, "strips"));
 
     // Seamless within and across zooms, every decoded error within its geometricError: the
     // blocks' tiles meet their neighbours' and the coarser zooms' vertex for vertex.

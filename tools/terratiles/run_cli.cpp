@@ -391,32 +391,7 @@ void runBlockTinCommand(const TinCommandOptions& options, const DemMosaic& mosai
   std::exception_ptr failure;
   if (leader) {
     try {
-      const std::filesystem::path manifest_path = blocks_dir / "manifest.json";
-      std::error_code ec;
-      bool keep = false;
-      if (std::filesystem::exists(manifest_path, ec)) {
-        std::ifstream in(manifest_path);
-        const nlohmann::json found = nlohmann::json::parse(in, nullptr, false);
-        if (options.resume && found != manifest) {
-          throw Error(ErrorCode::Usage, blocks_dir.string() + " holds the blocks of another run (other inputs, "
-                                        "options or version); run without --resume to start again");
-        }
-        keep = options.resume;
-        if (!keep) progress.note("an interrupted run's blocks in " + blocks_dir.string() + " were dropped (--resume continues them)");
-      }
-      if (!keep) {
-        std::filesystem::remove_all(blocks_dir, ec);
-        std::filesystem::create_directories(blocks_dir, ec);
-        if (ec) {
-          throw Error(ErrorCode::Output, blocks_dir.string() + ": cannot create the folder of the block files (" +
-                                             ec.message() + "); check that the output's folder is writable");
-        }
-        std::ofstream out(manifest_path.string() + ".tmp");
-        out << manifest.dump(2) << "\n";
-        out.close();
-        std::filesystem::rename(manifest_path.string() + ".tmp", manifest_path, ec);
-        if (!out || ec) throw Error(ErrorCode::Output, manifest_path.string() + ": cannot write it; check the free space");
-      }
+      prepareBlocksFolder(blocks_dir, manifest.dump(2) + "\n", options.resume, "", "run", progress);
     } catch (...) {
       failure = std::current_exception();
     }
@@ -860,6 +835,11 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Build in blocks: each a tile of one zoom at most this many pixels a side, read, triangulated, "
                    "simplified and written on its own, its outline locked until the blocks' levels join for the "
                    "coarser zooms (0: blocks of 2048 when the mosaic has more than 64 M pixels)")
+      ->capture_default_str();
+  build_command
+      ->add_option("--strip-pixels", build.strip_pixels,
+                   "Blocks: the zooms from the blocks' zoom up are measured against the DEM in strips of rows of "
+                   "about this many pixels (28 bytes each, plus the rows the tallest triangle reaches)")
       ->capture_default_str();
   build_command->add_flag("--resume", build.resume,
                           "Blocks: continue an interrupted build (killed, power lost) from the block files it left in "
