@@ -349,6 +349,19 @@ struct WrittenZooms {
   std::vector<DrawnTriangles> coarsest;  // the last zoom's tiles, when asked for
 };
 
+// Snaps each vertex of `zoom` (placed in `snapped`) to its own grid (ZoomToWrite::vertex_step);
+// returns the coarsest step, the zoom's own included.
+double snapToVertexSteps(const ZoomToWrite& zoom, std::vector<EcefPoint>& snapped) {
+  double largest_step = zoom.step;
+  for (std::size_t v = 0; v < snapped.size(); ++v) {
+    const double step = zoom.vertex_step[v];
+    largest_step = std::max(largest_step, step);
+    EcefPoint& p = snapped[v];
+    p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
+  }
+  return largest_step;
+}
+
 // Draws, measures, encodes and writes `zooms` (finest first) against `globe`: as the whole
 // build does, each tile's error against the DEM pixels under it and against the next finer
 // zoom's drawn surface (for the first zoom: `finer_surface`, when not null; taken). `normals_fix` may replace
@@ -377,13 +390,7 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
     globe.place(mesh.vertices, {}, snapped);
     std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
     if (normals_fix) normals_fix(mesh, normals);
-    double largest_step = zoom.step;
-    for (std::size_t v = 0; v < snapped.size(); ++v) {
-      const double step = zoom.vertex_step[v];
-      largest_step = std::max(largest_step, step);
-      EcefPoint& p = snapped[v];
-      p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
-    }
+    const double largest_step = snapToVertexSteps(zoom, snapped);
     const double shift_m = 0.87 * largest_step;
     ZoomSurface& surface = surfaces[k % 2];
     if (surface.empty()) {
@@ -480,13 +487,7 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, std::vector<Dra
     std::vector<EcefPoint> snapped(mesh.vertices.size());
     globe.place(mesh.vertices, {}, snapped);
     const std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
-    double largest_step = zoom.step;
-    for (std::size_t v = 0; v < snapped.size(); ++v) {
-      const double step = zoom.vertex_step[v];
-      largest_step = std::max(largest_step, step);
-      EcefPoint& p = snapped[v];
-      p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
-    }
+    const double largest_step = snapToVertexSteps(zoom, snapped);
     drawn[k].shift_m = 0.87 * largest_step;
     drawn[k].contents.resize(zoom.tiles.size());
     drawn[k].measures.resize(zoom.tiles.size());
