@@ -458,6 +458,63 @@ DemGrid readDemWindow(const DemMosaic& mosaic, const PixelWindow& window) {
   return dem;
 }
 
+namespace {
+
+// Mosaic rows per readDemOverview strip: a multiple of the factor.
+std::int64_t overviewStripRows(const DemMosaic& mosaic, std::int32_t factor, std::int64_t strip_pixels) {
+  const std::int64_t rows = std::max<std::int64_t>(1, strip_pixels / std::max<std::int64_t>(1, mosaic.width));
+  return std::max<std::int64_t>(1, rows / factor) * factor;
+}
+
+}  // namespace
+
+std::int64_t overviewStrips(const DemMosaic& mosaic, std::int32_t factor, std::int64_t strip_pixels) {
+  const std::int64_t rows = overviewStripRows(mosaic, factor, strip_pixels);
+  return (mosaic.height + rows - 1) / rows;
+}
+
+DemGrid readDemOverview(const DemMosaic& mosaic, std::int32_t factor, std::int64_t strip_pixels, Progress* progress,
+                        const std::function<void(const DemGrid&, std::int64_t)>& each_strip) {
+  TERRATILES_ASSERT(factor >= 1);
+  const std::int64_t f = factor;
+  DemGrid overview;
+  overview.width = static_cast<std::int32_t>((mosaic.width + f - 1) / f);
+  overview.height = static_cast<std::int32_t>((mosaic.height + f - 1) / f);
+  overview.origin_x = mosaic.origin_x;
+  overview.origin_y = mosaic.origin_y;
+  overview.pixel_size_x = mosaic.pixel_size * static_cast<double>(f);
+  overview.pixel_size_y = overview.pixel_size_x;
+  overview.crs_name = mosaic.crs_name;
+  overview.crs_wkt = mosaic.crs_wkt;
+  overview.heights_m.assign(overview.pixelCount(), DemGrid::kNoData);
+  const std::int64_t strip_rows = overviewStripRows(mosaic, factor, strip_pixels);
+  std::vector<double> sums(static_cast<std::size_t>(overview.width));
+  std::vector<std::uint32_t> counts(sums.size());
+  for (std::int64_t r0 = 0; r0 < mosaic.height; r0 += strip_rows) {
+    const auto rows = static_cast<std::int32_t>(std::min(strip_rows, mosaic.height - r0));
+    const DemGrid strip = readDemWindow(mosaic, {0, r0, static_cast<std::int32_t>(mosaic.width), rows});
+    for (std::int32_t r = 0; r < rows; r += factor) {
+      std::fill(sums.begin(), sums.end(), 0.0);
+      std::fill(counts.begin(), counts.end(), 0u);
+      for (std::int32_t dr = 0; dr < factor && r + dr < rows; ++dr) {
+        for (std::int32_t col = 0; col < strip.width; ++col) {
+          const float h = strip.heightAt(col, r + dr);
+          if (std::isnan(h)) continue;
+          sums[static_cast<std::size_t>(col / factor)] += h;
+          ++counts[static_cast<std::size_t>(col / factor)];
+        }
+      }
+      const std::size_t out_row = static_cast<std::size_t>((r0 + r) / f) * static_cast<std::size_t>(overview.width);
+      for (std::size_t c = 0; c < sums.size(); ++c) {
+        if (counts[c] > 0) overview.heights_m[out_row + c] = static_cast<float>(sums[c] / counts[c]);
+      }
+    }
+    if (each_strip) each_strip(strip, r0);
+    if (progress) progress->advance();
+  }
+  return overview;
+}
+
 DemGrid readDem(const DemMosaic& mosaic, const ReadDemOptions& options) {
   if (mosaic.width > INT32_MAX || mosaic.height > INT32_MAX ||
       (options.max_pixels > 0 &&

@@ -13,6 +13,7 @@
 // opening only the files it overlaps. readDem reads the whole mosaic at once.
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -64,6 +65,19 @@ struct ReadDemOptions {
   std::size_t max_pixels = 400'000'000;
   Progress* progress = nullptr;  // advanced once per input file read
 };
+
+// The mosaic at 1/factor of its resolution (factor >= 1): pixel (c, r) holds the mean of the
+// valid mosaic pixels [c f, c f + f) x [r f, r f + f) (NaN where none is valid), so its centre
+// lies at mosaic pixel ((c + 0.5) f - 0.5, (r + 0.5) f - 0.5); ceil(width / f) x ceil(height / f)
+// pixels of f times the size, from the mosaic's corner. Read in strips of rows of about
+// `strip_pixels` mosaic pixels (never the whole mosaic at once); `progress`, when given, is
+// advanced once per strip (the caller's stage, of overviewStrips(...) steps); `each_strip`,
+// when given, sees every strip read (its heights, and its first row in the mosaic).
+DemGrid readDemOverview(const DemMosaic& mosaic, std::int32_t factor, std::int64_t strip_pixels,
+                        Progress* progress = nullptr,
+                        const std::function<void(const DemGrid&, std::int64_t)>& each_strip = {});
+// How many strips readDemOverview reads.
+std::int64_t overviewStrips(const DemMosaic& mosaic, std::int32_t factor, std::int64_t strip_pixels);
 
 // The whole mosaic; throws Error(Input) when every pixel is nodata.
 DemGrid readDem(const DemMosaic& mosaic, const ReadDemOptions& options = {});

@@ -5,10 +5,40 @@
 #include <numbers>
 
 namespace terratiles {
+namespace {
 
-PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
-                        double shift_m) {
-  const DemGrid& dem = globe.dem();
+// The per-row figures of a whole DEM's globe, as DemOnGlobe gives them.
+struct GlobeRows {
+  const DemOnGlobe& globe;
+  std::int32_t width() const { return globe.dem().width; }
+  std::int32_t height() const { return globe.dem().height; }
+  double rowSpacing(std::int32_t row) const { return globe.rowSpacing(row); }
+  double columnSpacing(std::int32_t row) const { return globe.columnSpacing(row); }
+  double maxSinLatitude(std::int32_t row) const { return globe.maxSinLatitude(row); }
+  bool poleRow(std::int32_t row) const { return globe.poleRow(row); }
+  bool wrapsLongitude() const { return globe.wrapsLongitude(); }
+  double slack() const { return 1; }
+};
+
+// The same of a mosaic, collected strip by strip (LatticeRows), with its slack.
+struct CollectedRows {
+  const LatticeRows& rows;
+  std::int32_t width() const { return rows.width; }
+  std::int32_t height() const { return static_cast<std::int32_t>(rows.pole.size()); }
+  double rowSpacing(std::int32_t row) const { return rows.row_spacing_m[static_cast<std::size_t>(row)]; }
+  double columnSpacing(std::int32_t row) const { return rows.column_spacing_m[static_cast<std::size_t>(row)]; }
+  double maxSinLatitude(std::int32_t row) const { return rows.max_sin_latitude[static_cast<std::size_t>(row)]; }
+  bool poleRow(std::int32_t row) const { return rows.pole[static_cast<std::size_t>(row)] != 0; }
+  bool wrapsLongitude() const { return rows.wraps_longitude; }
+  double slack() const { return rows.slack; }
+};
+
+template <typename Rows>
+PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                          double shift_m) {
+  struct {
+    std::int32_t width, height;
+  } dem{globe.width(), globe.height()};
   constexpr double kRadius_m = 6.3e6;  // below every WGS84 radius of curvature
   double row_min = 1e300, row_max = -1e300;
   for (const GridCorner& corner : corners) {
@@ -29,7 +59,7 @@ PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>
   }
   const double tan_lat = std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
   const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
-  const double margin_m = bulge_m + shift_m;
+  const double margin_m = (bulge_m + shift_m) * globe.slack();
   PixelMargin margin;
   margin.rows = row_spacing > 0 ? margin_m / row_spacing : static_cast<double>(dem.height);
   margin.columns = column_spacing > 0 && std::isfinite(column_spacing) ? margin_m / column_spacing
@@ -38,9 +68,12 @@ PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>
   return margin;
 }
 
-PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
-                         double shift_m) {
-  const DemGrid& dem = globe.dem();
+template <typename Rows>
+PixelBox candidatePixelsOf(const Rows& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                           double shift_m) {
+  struct {
+    std::int32_t width, height;
+  } dem{globe.width(), globe.height()};
   double row_min = 1e300, row_max = -1e300, col_min = 1e300, col_max = -1e300;
   bool at_pole = false;
   for (const GridCorner& corner : corners) {
@@ -55,7 +88,7 @@ PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3
   }
   PixelBox box;
   if (!(col_min <= col_max) || !(row_min <= row_max)) return box;  // no corner with a column: nothing
-  const PixelMargin margin = strayMargin(globe, corners, longest_edge_m, shift_m);
+  const PixelMargin margin = strayMarginOf(globe, corners, longest_edge_m, shift_m);
   const double margin_rows = margin.rows, margin_cols = margin.columns;
   box.row0 = static_cast<std::int32_t>(std::max(0.0, std::ceil(row_min - margin_rows - 1e-9)));
   box.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, std::floor(row_max + margin_rows + 1e-9)));
@@ -84,6 +117,51 @@ PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3
   box.col0 = static_cast<std::int64_t>(first);
   box.col1 = static_cast<std::int64_t>(last);
   return box;
+}
+
+}  // namespace
+
+PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                        double shift_m) {
+  return strayMarginOf(GlobeRows{globe}, corners, longest_edge_m, shift_m);
+}
+
+PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
+                         double shift_m) {
+  return candidatePixelsOf(GlobeRows{globe}, corners, longest_edge_m, shift_m);
+}
+
+void LatticeRows::collect(const DemOnGlobe& window, std::int64_t first_row) {
+  const DemGrid& dem = window.dem();
+  if (pole.empty()) return;
+  wraps_longitude = window.wrapsLongitude();
+  if (first_row != 0 || static_cast<std::size_t>(dem.height) != pole.size()) slack = kSlack;
+  for (std::int32_t r = 0; r < dem.height; ++r) {
+    const std::int64_t row = first_row + r;
+    if (row < 0 || row >= static_cast<std::int64_t>(pole.size())) continue;
+    const auto i = static_cast<std::size_t>(row);
+    column_spacing_m[i] = window.columnSpacing(r);
+    max_sin_latitude[i] = window.maxSinLatitude(r);
+    pole[i] = window.poleRow(r) ? 1 : 0;
+    if (r + 1 < dem.height) row_spacing_m[i] = window.rowSpacing(r);
+  }
+}
+
+void LatticeRows::finish() {
+  // A strip's last row has no spacing to the next row there: its neighbours' (the spacings
+  // change slowly from row to row; kSlack covers the difference).
+  const std::size_t rows = row_spacing_m.size();
+  for (std::size_t i = 0; i < rows; ++i) {
+    if (!std::isnan(row_spacing_m[i])) continue;
+    double spacing = std::numeric_limits<double>::infinity();
+    if (i > 0 && !std::isnan(row_spacing_m[i - 1])) spacing = std::min(spacing, row_spacing_m[i - 1]);
+    if (i + 1 < rows && !std::isnan(row_spacing_m[i + 1])) spacing = std::min(spacing, row_spacing_m[i + 1]);
+    row_spacing_m[i] = spacing;
+  }
+}
+
+PixelBox LatticeRows::box(const std::array<GridCorner, 3>& corners, double longest_edge_m, double shift_m) const {
+  return candidatePixelsOf(CollectedRows{*this}, corners, longest_edge_m, shift_m);
 }
 
 }  // namespace terratiles

@@ -19,6 +19,8 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
+#include <vector>
 
 #include "src/geo/dem_on_globe.h"
 #include "src/geo/drawn_triangle.h"
@@ -49,6 +51,38 @@ struct PixelMargin {
 };
 PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
                         double shift_m);
+
+// The per-row figures candidatePixels reads of a DEM's globe (DemOnGlobe::rowSpacing,
+// columnSpacing, maxSinLatitude, poleRow), for a whole mosaic, collected from the globes of
+// strips of its rows that span its whole width, so that the triangles a strip measures get
+// boxes in the mosaic's rows without its pixels: box() is candidatePixels on the mosaic's
+// globe, exactly when the figures come from one globe of the whole mosaic, else with its
+// margin grown by kSlack (strips place nodata pixels at their own mean height, which moves a
+// spacing by up to 1.5e-3 of it, and a row at a strip's end takes its neighbours' row
+// spacing), so that it holds every pixel candidatePixels would (and, for a triangle with a
+// corner at a pole, maybe more pixels of the pole row: the same point, met with the same
+// offset). Memory: 26 bytes per row.
+struct LatticeRows {
+  static constexpr double kSlack = 1.05;
+  double slack = 1;  // kSlack once a strip of fewer than all rows was collected
+  std::int32_t width = 0;
+  std::vector<double> row_spacing_m, column_spacing_m, max_sin_latitude;
+  std::vector<std::uint8_t> pole;
+  bool wraps_longitude = false;
+
+  LatticeRows(std::int32_t columns, std::int64_t rows)
+      : width(columns),
+        row_spacing_m(static_cast<std::size_t>(rows), std::numeric_limits<double>::quiet_NaN()),
+        column_spacing_m(static_cast<std::size_t>(rows), 0.0),
+        max_sin_latitude(static_cast<std::size_t>(rows), 1.0),
+        pole(static_cast<std::size_t>(rows), 0) {}
+  // Takes the figures of `window`'s rows (every column of rows first_row ... of the mosaic).
+  void collect(const DemOnGlobe& window, std::int64_t first_row);
+  // After every row was collected once.
+  void finish();
+  // candidatePixels in the mosaic's pixels, grown as above.
+  PixelBox box(const std::array<GridCorner, 3>& corners, double longest_edge_m, double shift_m) const;
+};
 
 // visit(pixel index, signed offset: the triangle above the DEM point when positive) for every
 // pixel of `box` whose vertical meets `triangle`, row by row.

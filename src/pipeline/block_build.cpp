@@ -15,6 +15,12 @@
 #include <optional>
 #include <tuple>
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
@@ -56,6 +62,18 @@ DemGrid mosaicFrameGrid(const DemMosaic& mosaic) {
   grid.lattice_origin_x = mosaic.origin_x;
   grid.lattice_origin_y = mosaic.origin_y;
   return grid;
+}
+
+// A mosaic pixel coordinate on an overview of `factor` pixels a side per overview pixel
+// (readDemOverview), and back; exact for a power-of-two factor and pixel centres.
+double mosaicToOverview(double coordinate, std::int32_t factor) { return (coordinate + 0.5) / factor - 0.5; }
+double overviewToMosaic(double coordinate, std::int32_t factor) { return (coordinate + 0.5) * factor - 0.5; }
+
+// The smallest power of two f whose overview of the mosaic has at most `pixels` pixels.
+std::int32_t overviewFactor(const DemMosaic& mosaic, std::int64_t pixels) {
+  std::int32_t f = 1;
+  while (((mosaic.width + f - 1) / f) * ((mosaic.height + f - 1) / f) > pixels) f *= 2;
+  return f;
 }
 
 // The local scheme's extent: the mosaic's (whatever window a frame is made on).
@@ -107,6 +125,14 @@ struct BlockLayout {
   std::vector<TileKey> keys;  // per block, row-major: its tile at Zb
   AxisBorders columns, rows;  // for TileFrame::followBlocks
   void follow(TileFrame& frame) const { frame.followBlocks(columns.lines, columns.values, rows.lines, rows.values); }
+  // The same for a frame on an overview of the mosaic (`factor` mosaic pixels a side each).
+  void follow(TileFrame& frame, std::int32_t factor) const {
+    const auto scaled = [&](std::vector<double> lines) {
+      for (double& line : lines) line = mosaicToOverview(line, factor);
+      return lines;
+    };
+    frame.followBlocks(scaled(columns.lines), columns.values, scaled(rows.lines), rows.values);
+  }
 };
 
 // x (lon or CRS x) and y (lat or CRS y) of the scheme for pixel (col, row), and back.
@@ -460,19 +486,106 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
   return out;
 }
 
+// The mosaic rows of the candidate pixels of a tile's triangles (LatticeRows::box); {max, -1}
+// for none.
+std::array<std::int64_t, 2> candidateRows(const LatticeRows& rows, const std::vector<EcefPoint>& positions,
+                                          const std::vector<GridCorner>& grid,
+                                          const std::vector<std::uint32_t>& indices, double shift_m) {
+  std::array<std::int64_t, 2> span{std::numeric_limits<std::int64_t>::max(), -1};
+  for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+    const DrawnTriangle triangle(positions[indices[t]], positions[indices[t + 1]], positions[indices[t + 2]]);
+    if (triangle.degenerate()) continue;
+    const PixelBox box =
+        rows.box({grid[indices[t]], grid[indices[t + 1]], grid[indices[t + 2]]}, triangle.longestEdge(), shift_m);
+    if (box.row1 < box.row0) continue;
+    span = {std::min<std::int64_t>(span[0], box.row0), std::max<std::int64_t>(span[1], box.row1)};
+  }
+  return span;
+}
+
+// Drawn triangles kept in a file until the strips that measure them (the blocks' tiles of the
+// zoom below the joined ones: otherwise the largest thing the coarse zooms hold), each with the
+// mosaic rows of its candidate pixels. load() may run on several threads at once. The file
+// goes when this does.
+class SpilledTiles {
+ public:
+  explicit SpilledTiles(std::filesystem::path path) : path_(std::move(path)) {
+    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd_ < 0) fail("cannot create");
+  }
+  ~SpilledTiles() {
+    ::close(fd_);
+    std::error_code ec;
+    std::filesystem::remove(path_, ec);
+  }
+  SpilledTiles(const SpilledTiles&) = delete;
+  SpilledTiles& operator=(const SpilledTiles&) = delete;
+
+  void add(const DrawnTriangles& t, std::array<std::int64_t, 2> rows) {
+    RecordWriter out;
+    out.putArray(t.positions);
+    out.putArray(t.grid);
+    out.putArray(t.triangle_indices);
+    out.put(t.shift_m);
+    for (std::size_t done = 0; done < out.bytes.size();) {
+      const ssize_t n = ::pwrite(fd_, out.bytes.data() + done, out.bytes.size() - done, static_cast<off_t>(end_ + done));
+      if (n <= 0) fail("cannot write");
+      done += static_cast<std::size_t>(n);
+    }
+    tiles_.push_back({end_, out.bytes.size(), rows});
+    end_ += out.bytes.size();
+  }
+  std::size_t size() const { return tiles_.size(); }
+  const std::array<std::int64_t, 2>& rows(std::size_t i) const { return tiles_[i].rows; }
+  DrawnTriangles load(std::size_t i) const {
+    const Tile& tile = tiles_[i];
+    std::string bytes(tile.size, '\0');
+    for (std::size_t done = 0; done < bytes.size();) {
+      const ssize_t n = ::pread(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(tile.offset + done));
+      if (n <= 0) fail("cannot read");
+      done += static_cast<std::size_t>(n);
+    }
+    const std::string path = path_.string();
+    RecordReader in{path, bytes};
+    DrawnTriangles t;
+    t.positions = in.getArray<EcefPoint>();
+    t.grid = in.getArray<GridCorner>();
+    t.triangle_indices = in.getArray<std::uint32_t>();
+    t.shift_m = in.get<double>();
+    in.expectEnd();
+    return t;
+  }
+
+ private:
+  struct Tile {
+    std::uint64_t offset = 0, size = 0;
+    std::array<std::int64_t, 2> rows;
+  };
+  [[noreturn]] void fail(const char* what) const {
+    throw Error(ErrorCode::Output, path_.string() + ": " + what + " the file of drawn triangles waiting for their strips (" +
+                                       std::strerror(errno) + "); expected a writable disk with room for it");
+  }
+  std::filesystem::path path_;
+  int fd_ = -1;
+  std::uint64_t end_ = 0;
+  std::vector<Tile> tiles_;
+};
+
 // The zooms from the blocks' zoom up (finest first; `finer_drawn`: the drawn triangles of the
-// zoom below the first, the blocks'), measured against the DEM strip by strip: each strip of
-// rows is read with every row a triangle of these zooms can reach from it (the tallest
-// triangle's rows above and below), placed on the globe, and every tile drawn over it; a
-// tile's error is the largest over the strips, each pixel counted (for the RMS) in its own
-// strip. Memory: one window of the mosaic of about `window_pixels` (28 bytes per pixel; more
-// where the tallest triangle's rows need it) and the zooms' drawn triangles,
-// whatever the mosaic's size. The contents are made first on `globe` (the whole DEM, which the
-// caller may then let go through `release`).
-WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, std::vector<DrawnTriangles> finer_drawn,
+// zoom below the first, the blocks', loaded for the strips they meet), measured against the DEM strip by strip: each strip of
+// about `window_pixels` is read, placed on the globe, and every triangle whose candidate
+// pixels (`rows`: the mosaic's LatticeRows) meet it is measured on its pixels, however far the
+// triangle reaches past it; a tile's error is the largest over the strips, each pixel measured
+// and counted (for the RMS) in its own strip, so the figures are those of a measure on the
+// whole DEM. Memory: one strip (28 bytes per pixel) and the zooms' drawn triangles, whatever
+// the mosaic's size. The contents are made first on `globe` (the whole DEM, or its overview of
+// `overview_factor` pixels a side, which the caller may then let go through `release`).
+WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTiles& finer_drawn,
                                 const DemOnGlobe& globe, const std::function<void()>& release, const DemMosaic& mosaic,
-                                const GeoidGrid* geoid, std::int64_t window_pixels, const GlbOptions& glb_base,
-                                bool implicit_tiling, OutputDirectory& output, DemStatistics& stats, Progress& progress) {
+                                const GeoidGrid* geoid, const LatticeRows& rows, std::int64_t window_pixels,
+                                std::int32_t overview_factor,
+                                const GlbOptions& glb_base, bool implicit_tiling, OutputDirectory& output,
+                                DemStatistics& stats, Progress& progress) {
   WrittenZooms out;
   struct ZoomTiles {
     std::vector<DrawnContent> contents;
@@ -496,46 +609,47 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, std::vector<Dra
     });
   }
   if (release) release();
-
-  // The rows every triangle spans, and each tile's, in mosaic rows.
-  const auto rowsOf = [](const std::vector<GridCorner>& grid, const std::vector<std::uint32_t>& indices,
-                         std::int64_t& tallest) {
-    double low = 1e300, high = -1e300;
-    for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
-      double a = 1e300, b = -1e300;
-      for (std::size_t c = 0; c < 3; ++c) {
-        a = std::min(a, grid[indices[t + c]].row);
-        b = std::max(b, grid[indices[t + c]].row);
-      }
-      tallest = std::max(tallest, static_cast<std::int64_t>(std::ceil(b - a)));
-      low = std::min(low, a);
-      high = std::max(high, b);
-    }
-    return std::array<double, 2>{low, high};
-  };
-  std::int64_t tallest = 0;
-  std::vector<std::array<double, 2>> finer_rows(finer_drawn.size());
-  for (std::size_t i = 0; i < finer_drawn.size(); ++i) finer_rows[i] = rowsOf(finer_drawn[i].grid, finer_drawn[i].triangle_indices, tallest);
-  std::vector<std::vector<std::array<double, 2>>> tile_rows(zooms.size());
-  for (std::size_t k = 0; k < zooms.size(); ++k) {
-    for (const DrawnContent& c : drawn[k].contents) tile_rows[k].push_back(rowsOf(c.grid, c.triangle_indices, tallest));
-  }
   const std::int64_t width = mosaic.width, height = mosaic.height;
-  const std::int64_t reach = tallest + 2;
-  const std::int64_t strip_rows = std::max<std::int64_t>(16, window_pixels / std::max<std::int64_t>(width, 1) - 2 * reach);
+  if (overview_factor > 1) {
+    // The contents' grid positions from the overview's pixels to the mosaic's. A vertex at a
+    // pole is one on a pole row of the mosaic (an overview's rows lie off the poles).
+    const auto poleRow = [&](std::int64_t row) {
+      const DemGrid line = readDemWindow(mosaic, {0, row, static_cast<std::int32_t>(width), 1});
+      return DemOnGlobe(line, geoid, nullptr).poleRow(0);
+    };
+    const bool first_pole = poleRow(0), last_pole = poleRow(height - 1);
+    for (ZoomTiles& tiles : drawn) {
+      for (DrawnContent& content : tiles.contents) {
+        for (GridCorner& g : content.grid) {
+          g.col = overviewToMosaic(g.col, overview_factor);
+          g.row = overviewToMosaic(g.row, overview_factor);
+          g.at_pole = (g.row == 0 && first_pole) || (g.row == static_cast<double>(height - 1) && last_pole);
+        }
+      }
+    }
+  }
+
+  std::vector<std::vector<std::array<std::int64_t, 2>>> tile_rows(zooms.size());
+  for (std::size_t k = 0; k < zooms.size(); ++k) {
+    tile_rows[k].resize(drawn[k].contents.size());
+    tbb::parallel_for(std::size_t{0}, drawn[k].contents.size(), [&](std::size_t i) {
+      const DrawnContent& c = drawn[k].contents[i];
+      tile_rows[k][i] = candidateRows(rows, c.positions, c.grid, c.triangle_indices, drawn[k].shift_m);
+    });
+  }
+  const std::int64_t strip_rows = std::max<std::int64_t>(16, window_pixels / std::max<std::int64_t>(width, 1));
   std::vector<ZoomTally> tallies(zooms.size());
   stats = DemStatistics();
   float low_height = std::numeric_limits<float>::infinity(), high_height = -low_height;
   progress.beginStage("measuring zooms " + std::to_string(zooms.back().zoom) + " to " + std::to_string(zooms.front().zoom) +
-                          " strip by strip",
+                          " strip by strip (" + std::to_string(strip_rows) + " rows each)",
                       static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
   for (std::int64_t r0 = 0; r0 < height; r0 += strip_rows) {
     const std::int64_t r1 = std::min(height, r0 + strip_rows);
-    const std::int64_t w0 = std::max<std::int64_t>(0, r0 - reach), w1 = std::min(height, r1 + reach);
-    const DemGrid window = readDemWindow(mosaic, {0, w0, static_cast<std::int32_t>(width), static_cast<std::int32_t>(w1 - w0)});
-    for (std::int64_t row = r0 - w0; row < r1 - w0; ++row) {
-      for (std::int64_t col = 0; col < width; ++col) {
-        const float h = window.heightAt(static_cast<std::int32_t>(col), static_cast<std::int32_t>(row));
+    const DemGrid window = readDemWindow(mosaic, {0, r0, static_cast<std::int32_t>(width), static_cast<std::int32_t>(r1 - r0)});
+    for (std::int32_t row = 0; row < window.height; ++row) {
+      for (std::int32_t col = 0; col < window.width; ++col) {
+        const float h = window.heightAt(col, row);
         if (std::isnan(h)) continue;
         ++stats.valid_pixels;
         low_height = std::min(low_height, h);
@@ -543,43 +657,30 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, std::vector<Dra
       }
     }
     const DemOnGlobe strip(window, geoid, nullptr);
-    const PixelBoxes boxes(strip);
-    const auto inWindow = [&](const std::array<double, 2>& rows) {
-      return rows[1] >= static_cast<double>(w0) - 1 && rows[0] <= static_cast<double>(w1);
-    };
-    // Grid positions in the window's rows.
-    const auto shifted = [&](const std::vector<GridCorner>& grid) {
-      std::vector<GridCorner> moved = grid;
-      for (GridCorner& g : moved) g.row -= static_cast<double>(w0);
-      return moved;
-    };
+    const auto inStrip = [&](const std::array<std::int64_t, 2>& span) { return span[1] >= r0 && span[0] < r1; };
     std::array<ZoomSurface, 2> surfaces{ZoomSurface(window.pixelCount()), ZoomSurface(window.pixelCount())};
     tbb::parallel_for(std::size_t{0}, finer_drawn.size(), [&](std::size_t i) {
-      if (!inWindow(finer_rows[i])) return;
-      const DrawnTriangles& t = finer_drawn[i];
-      measureDrawnTile(strip, t.positions, shifted(t.grid), t.triangle_indices, t.shift_m, nullptr, &surfaces[1], nullptr,
-                       &boxes);
+      if (!inStrip(finer_drawn.rows(i))) return;
+      const DrawnTriangles t = finer_drawn.load(i);
+      measureDrawnTileInStrip(strip, r0, rows, t.positions, t.grid, t.triangle_indices, t.shift_m, nullptr, &surfaces[1]);
     });
     for (std::size_t k = 0; k < zooms.size(); ++k) {
       ZoomSurface& surface = surfaces[k % 2];
       const ZoomSurface& finer = surfaces[(k + 1) % 2];
       if (k > 0) surface.clear();
       tbb::parallel_for(std::size_t{0}, drawn[k].contents.size(), [&](std::size_t i) {
-        if (!inWindow(tile_rows[k][i])) return;
+        if (!inStrip(tile_rows[k][i])) return;
         const DrawnContent& c = drawn[k].contents[i];
-        const DrawnTileMeasure m = measureDrawnTile(strip, c.positions, shifted(c.grid), c.triangle_indices,
-                                                    drawn[k].shift_m, &finer, &surface, nullptr, &boxes);
+        const DrawnTileMeasure m = measureDrawnTileInStrip(strip, r0, rows, c.positions, c.grid, c.triangle_indices,
+                                                           drawn[k].shift_m, &finer, &surface);
         DrawTileMeasureSum& sum = drawn[k].measures[i];
         sum.max_error_m = std::max(sum.max_error_m, m.max_error_m);
         sum.finer_difference_m = std::max(sum.finer_difference_m, m.finer_difference_m);
       });
-      for (std::int64_t row = r0 - w0; row < r1 - w0; ++row) {
-        for (std::int64_t col = 0; col < width; ++col) {
-          const std::size_t p = static_cast<std::size_t>(row * width + col);
-          if (!surface.drawn(p)) continue;
-          tallies[k].sum_squares += surface.error(p) * surface.error(p);
-          ++tallies[k].drawn_pixels;
-        }
+      for (std::size_t p = 0; p < window.pixelCount(); ++p) {
+        if (!surface.drawn(p)) continue;
+        tallies[k].sum_squares += surface.error(p) * surface.error(p);
+        ++tallies[k].drawn_pixels;
       }
     }
     progress.advance();
@@ -1092,13 +1193,53 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
                                              : std::string());
   progress.note("blocks: " + blocks_said);
 
+  // The DEM on the globe while the coarse levels are simplified under their budgets and their
+  // tiles' contents made, let go before they are measured strip by strip: the whole DEM, or
+  // when it has more than --overview-pixels its overview (the levels then live on the
+  // overview's grid until their contents go back to the mosaic's pixels to be measured).
+  if (options.overview_pixels <= 0) {
+    throw Error(ErrorCode::Usage, "--overview-pixels is " + std::to_string(options.overview_pixels) +
+                                      ", expected a positive number of pixels (default 4000000)");
+  }
+  const std::int32_t factor = overviewFactor(mosaic, options.overview_pixels);
+  const std::string top_zooms = "zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(block_zoom);
+  std::optional<DemGrid> dem_storage;
+  const DemGrid dem_header = mosaicFrameGrid(mosaic);
+  // What the strips need to know of rows outside them (from the whole globe or the overview's strips).
+  LatticeRows lattice_rows(static_cast<std::int32_t>(mosaic.width), mosaic.height);
+  DemGrid top_grid = dem_header;  // the grid the levels live on, without heights
+  if (factor == 1) {
+    dem_storage = readDem(mosaic, "reading the DEM for " + top_zooms, progress);
+  } else {
+    progress.beginStage("reading the DEM's overview (1 pixel of " + std::to_string(factor) + " x " +
+                            std::to_string(factor) + ") for " + top_zooms,
+                        static_cast<std::uint64_t>(overviewStrips(mosaic, factor, options.strip_pixels)));
+    dem_storage = readDemOverview(mosaic, factor, options.strip_pixels, &progress,
+                                  [&](const DemGrid& strip, std::int64_t first_row) {
+                                    lattice_rows.collect(DemOnGlobe(strip, geoid_grid, nullptr), first_row);
+                                  });
+    lattice_rows.finish();
+    progress.endStage();
+    top_grid.width = dem_storage->width;
+    top_grid.height = dem_storage->height;
+    top_grid.pixel_size_x = dem_storage->pixel_size_x;
+    top_grid.pixel_size_y = dem_storage->pixel_size_y;
+  }
+  const DemGrid& dem = *dem_storage;
+  std::optional<DemOnGlobe> globe_storage;
+  globe_storage.emplace(dem, geoid_grid, &progress);
+  const DemOnGlobe& globe = *globe_storage;
+  if (factor == 1) {
+    lattice_rows.collect(globe, 0);
+    lattice_rows.finish();
+  }
   // 3. The levels at Zb stitched into one mesh: the finest level of the rest.
   progress.beginStage("joining the blocks' levels at zoom " + std::to_string(block_zoom), block_count);
   TinMesh top_mesh;
   FacePartition top_inherited;
   std::vector<TileKey> top_cluster_tiles;
   BlockVertexNumbering numbering;
-  std::vector<DrawnTriangles> drawn_below;  // the blocks' tiles at Zb + 1
+  SpilledTiles drawn_below(blocks_dir / "drawn_below");  // the blocks' tiles at Zb + 1
   std::map<std::int32_t, ZoomTally> tallies;
   std::map<std::tuple<int, int, int>, TileNode> nodes;
   const auto addNodes = [&](std::vector<TileNode>& list) {
@@ -1121,24 +1262,23 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
       top_cluster_tiles.insert(top_cluster_tiles.end(), h.cluster_tiles.begin(), h.cluster_tiles.end());
       for (const auto& [zoom, tally] : h.written.tallies) tallies[zoom].add(tally);
       addNodes(h.written.nodes);
-      for (DrawnTriangles& t : h.written.coarsest) drawn_below.push_back(std::move(t));
+      for (const DrawnTriangles& t : h.written.coarsest) {
+        drawn_below.add(t, candidateRows(lattice_rows, t.positions, t.grid, t.triangle_indices, t.shift_m));
+      }
       progress.advance();
     }
   }
   top_inherited.cluster_count = static_cast<std::int32_t>(top_cluster_tiles.size());
   progress.endStage();
+  if (factor > 1) {
+    for (GridPoint& p : top_mesh.vertices) {
+      p.col = mosaicToOverview(p.col, factor);
+      p.row = mosaicToOverview(p.row, factor);
+    }
+  }
 
-  // The whole DEM on the globe while the coarse levels are simplified under their budgets and
-  // their tiles' contents made; let go before they are measured strip by strip.
-  std::optional<DemGrid> dem_storage = readDem(
-      mosaic, "reading the DEM for zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(block_zoom), progress);
-  const DemGrid& dem = *dem_storage;
-  const DemGrid dem_header = mosaicFrameGrid(mosaic);
-  std::optional<DemOnGlobe> globe_storage;
-  globe_storage.emplace(dem, geoid_grid, &progress);
-  const DemOnGlobe& globe = *globe_storage;
-  TileFrame top_frame(options.scheme, dem_header);
-  layout.follow(top_frame);
+  TileFrame top_frame(options.scheme, top_grid, factor == 1 ? nullptr : &extent);
+  layout.follow(top_frame, factor);
   const auto top_levels = static_cast<std::size_t>(block_zoom - plan.min_zoom);
   std::vector<Level> levels;
   if (top_levels > 0) {
@@ -1167,8 +1307,9 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     malloc_trim(0);
 #endif
   };
-  WrittenZooms top = writeZoomsInStrips(zooms, std::move(drawn_below), globe, release, mosaic, geoid_grid,
-                                        options.strip_pixels, glb, options.implicit_tiling, output, stats, progress);
+  WrittenZooms top = writeZoomsInStrips(zooms, drawn_below, globe, release, mosaic, geoid_grid, lattice_rows,
+                                        options.strip_pixels, factor, glb, options.implicit_tiling, output, stats,
+                                        progress);
   for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;
   addNodes(top.nodes);
 

@@ -316,10 +316,14 @@ PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longes
   return candidatePixels(globe_, corners, longest_edge_m, shift_m);
 }
 
-DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
+namespace {
+
+// measureDrawnTile with the candidate pixels of each triangle from `boxOf(corners, triangle)`.
+template <typename BoxOf>
+DrawnTileMeasure measureTriangles(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
-                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
-                                  std::vector<std::uint32_t>* met, const PixelBoxes* boxes) {
+                                  const ZoomSurface* finer, ZoomSurface* surface, std::vector<std::uint32_t>* met,
+                                  BoxOf&& boxOf) {
   DrawnTileMeasure measure;
   const DemGrid& dem = globe.dem();
   std::vector<PixelOffset> hits;
@@ -327,8 +331,8 @@ DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefP
     const DrawnTriangle triangle(vertices[indices[t]], vertices[indices[t + 1]], vertices[indices[t + 2]]);
     if (triangle.degenerate()) continue;
     const std::array<GridCorner, 3> corners{grid[indices[t]], grid[indices[t + 1]], grid[indices[t + 2]]};
-    const PixelBox box = boxes ? boxes->box(corners, triangle.longestEdge(), shift_m)
-                               : candidatePixels(globe, corners, triangle.longestEdge(), shift_m);
+    const PixelBox box = boxOf(corners, triangle);
+    if (box.row1 < box.row0) continue;
     hits.clear();
     pixelsMeeting(globe, triangle, box, hits);
     for (const auto& [pixel, offset_m] : hits) {
@@ -345,6 +349,35 @@ DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefP
     }
   }
   return measure;
+}
+
+}  // namespace
+
+DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
+                                  std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
+                                  double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
+                                  std::vector<std::uint32_t>* met, const PixelBoxes* boxes) {
+  return measureTriangles(globe, vertices, grid, indices, finer, surface, met,
+                          [&](const std::array<GridCorner, 3>& corners, const DrawnTriangle& triangle) {
+                            return boxes ? boxes->box(corners, triangle.longestEdge(), shift_m)
+                                         : candidatePixels(globe, corners, triangle.longestEdge(), shift_m);
+                          });
+}
+
+DrawnTileMeasure measureDrawnTileInStrip(const DemOnGlobe& strip, std::int64_t first_row, const LatticeRows& rows,
+                                         std::span<const EcefPoint> vertices, std::span<const GridCorner> grid,
+                                         std::span<const std::uint32_t> indices, double shift_m,
+                                         const ZoomSurface* finer, ZoomSurface* surface) {
+  const std::int64_t strip_rows = strip.dem().height;
+  return measureTriangles(strip, vertices, grid, indices, finer, surface, nullptr,
+                          [&](const std::array<GridCorner, 3>& corners, const DrawnTriangle& triangle) {
+                            PixelBox box = rows.box(corners, triangle.longestEdge(), shift_m);
+                            const std::int64_t row0 = std::max<std::int64_t>(box.row0 - first_row, 0);
+                            const std::int64_t row1 = std::min<std::int64_t>(box.row1 - first_row, strip_rows - 1);
+                            box.row0 = static_cast<std::int32_t>(row0);
+                            box.row1 = static_cast<std::int32_t>(std::max<std::int64_t>(row1, row0 - 1));
+                            return box;
+                          });
 }
 
 void outlineEdges(std::span<const std::uint32_t> indices, std::size_t vertex_count, OutlineScratch& scratch,

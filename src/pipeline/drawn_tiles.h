@@ -146,6 +146,16 @@ DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefP
                                   double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
                                   std::vector<std::uint32_t>* met = nullptr, const PixelBoxes* boxes = nullptr);
 
+// The same on a strip of a mosaic's rows: `strip` is the globe of the mosaic's rows
+// first_row ... (its whole width), `grid` in the mosaic's pixels, `finer` and `surface` the
+// strip's. Each triangle's candidate pixels come from `rows` (the mosaic's, LatticeRows) and
+// are cut to the strip, so a pixel of the strip gets exactly the offsets a measure on the
+// whole mosaic gives it, whatever rows the triangle spans outside the strip.
+DrawnTileMeasure measureDrawnTileInStrip(const DemOnGlobe& strip, std::int64_t first_row, const LatticeRows& rows,
+                                         std::span<const EcefPoint> vertices, std::span<const GridCorner> grid,
+                                         std::span<const std::uint32_t> indices, double shift_m,
+                                         const ZoomSurface* finer, ZoomSurface* surface);
+
 // The outline of a triangle list: its edges that exactly one triangle has (an undirected edge
 // counted over all triangles, so an edge three triangles share is not on it), as (smaller
 // vertex, larger vertex) pairs in ascending order. Vertices are 0 .. vertex_count - 1. Linear

@@ -79,6 +79,11 @@ struct BuildOptions {
   // Blocks: the zooms from the blocks' zoom up are measured against the DEM in strips of rows
   // of about this many pixels (28 bytes each), plus the rows their tallest triangle reaches.
   std::int64_t strip_pixels = 16'000'000;
+  // Blocks: the levels from the blocks' zoom up are simplified against an overview of the DEM
+  // of at most this many pixels (the mean of every f x f pixels, f a power of two; f = 1 when
+  // the mosaic is no larger), so the coarse zooms never hold the whole DEM; their tiles are
+  // still measured against every pixel, strip by strip.
+  std::int64_t overview_pixels = 4'000'000;
   // Blocks: continue an interrupted build from the block files it left in OUTDIR.blocks/.
   bool resume = false;  // measured: 15-17 % smaller than 5 and within 3 % of 0, decoding 1.4x faster than 0
 };

@@ -159,6 +159,14 @@ TEST_SUITE("cli") {
     // Zooms 8 to 10 measured against the DEM in strips of about 40 rows (plus the rows their
     // tallest triangle reaches) instead of the whole raster at once: the same bytes.
     checkSameBytes(whole, build({gabon, "--strip-pixels", "100000"}, "strips"));
+    // Zooms 8 to 10 simplified against an overview of the DEM (1 pixel of 8 x 8, 301 x 151)
+    // instead of the DEM: other levels, the same zoom 11, and still measured on every pixel.
+    const auto overview = build({gabon, "--overview-pixels", "80000", "--strip-pixels", "100000"}, "overview");
+    REQUIRE(overview.size() == whole.size());
+    std::size_t same = 0;
+    for (const auto& [name, bytes] : whole) same += overview.at(name) == bytes ? 1 : 0;
+    CHECK(same >= 78);          // zoom 11's tiles
+    CHECK(same < whole.size());  // and not the coarser ones
 
     // Seamless within and across zooms, every decoded error within its geometricError: the
     // blocks' tiles meet their neighbours' and the coarser zooms' vertex for vertex.
@@ -166,6 +174,7 @@ TEST_SUITE("cli") {
     CheckOptions options;
     options.cuts = 300;
     test::checkSeamless(checkOutput(dir / "files", options, quiet));
+    test::checkSeamless(checkOutput(dir / "overview", options, quiet));
   }
 
   TEST_CASE("inputs that are no mosaic are refused before anything is written") {

@@ -841,6 +841,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "Blocks: the zooms from the blocks' zoom up are measured against the DEM in strips of rows of "
                    "about this many pixels (28 bytes each, plus the rows the tallest triangle reaches)")
       ->capture_default_str();
+  build_command
+      ->add_option("--overview-pixels", build.overview_pixels,
+                   "Blocks: the levels from the blocks' zoom up are simplified against an overview of the DEM of at "
+                   "most this many pixels (means of 2 x 2, 4 x 4, ... pixels; 12 bytes each for WGS84 longitude and "
+                   "latitude DEMs, 52 otherwise); their tiles are still measured against every pixel")
+      ->capture_default_str();
   build_command->add_flag("--resume", build.resume,
                           "Blocks: continue an interrupted build (killed, power lost) from the block files it left in "
                           "OUTDIR.blocks/, making only the missing blocks; the output is the same as an "
