@@ -583,62 +583,91 @@ class SpilledTiles {
 WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTiles& finer_drawn,
                                 const DemOnGlobe& globe, const std::function<void()>& release, const DemMosaic& mosaic,
                                 const GeoidGrid* geoid, const LatticeRows& rows, std::int64_t window_pixels,
-                                std::int32_t overview_factor,
+                                std::int32_t overview_factor, const std::filesystem::path& spill_dir,
                                 const GlbOptions& glb_base, bool implicit_tiling, OutputDirectory& output,
                                 DemStatistics& stats, Progress& progress) {
   WrittenZooms out;
+  const std::int64_t width = mosaic.width, height = mosaic.height;
+  // On an overview, a vertex at a pole is one on a pole row of the mosaic (an overview's rows
+  // lie off the poles).
+  bool first_pole = false, last_pole = false;
+  if (overview_factor > 1) {
+    const auto poleRow = [&](std::int64_t row) {
+      const DemGrid line = readDemWindow(mosaic, {0, row, static_cast<std::int32_t>(width), 1});
+      return DemOnGlobe(line, geoid, nullptr).poleRow(0);
+    };
+    first_pole = poleRow(0);
+    last_pole = poleRow(height - 1);
+  }
+  // Each zoom's tiles are drawn, encoded and written at once; what the strips measure of them
+  // waits in a file.
   struct ZoomTiles {
-    std::vector<DrawnContent> contents;
+    std::unique_ptr<SpilledTiles> spilled;
+    std::vector<TileKey> keys;
+    std::vector<Region> regions;
     std::vector<DrawTileMeasureSum> measures;
-    double shift_m = 0;
   };
   std::vector<ZoomTiles> drawn(zooms.size());
+  std::vector<ZoomTally> tallies(zooms.size());
   tbb::enumerable_thread_specific<ContentScratch> content_scratch;
+  std::size_t tile_count = 0;
+  for (const ZoomToWrite& zoom : zooms) tile_count += zoom.tiles.size();
+  progress.beginStage("drawing and writing zooms " + std::to_string(zooms.back().zoom) + " to " +
+                          std::to_string(zooms.front().zoom),
+                      tile_count);
   for (std::size_t k = 0; k < zooms.size(); ++k) {
     ZoomToWrite& zoom = zooms[k];
     const TinMesh& mesh = *zoom.mesh;
     std::vector<EcefPoint> snapped(mesh.vertices.size());
     globe.place(mesh.vertices, {}, snapped);
     const std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
-    const double largest_step = snapToVertexSteps(zoom, snapped);
-    drawn[k].shift_m = 0.87 * largest_step;
-    drawn[k].contents.resize(zoom.tiles.size());
-    drawn[k].measures.resize(zoom.tiles.size());
-    tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
-      drawn[k].contents[i] = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
-    });
-  }
-  if (release) release();
-  const std::int64_t width = mosaic.width, height = mosaic.height;
-  if (overview_factor > 1) {
-    // The contents' grid positions from the overview's pixels to the mosaic's. A vertex at a
-    // pole is one on a pole row of the mosaic (an overview's rows lie off the poles).
-    const auto poleRow = [&](std::int64_t row) {
-      const DemGrid line = readDemWindow(mosaic, {0, row, static_cast<std::int32_t>(width), 1});
-      return DemOnGlobe(line, geoid, nullptr).poleRow(0);
-    };
-    const bool first_pole = poleRow(0), last_pole = poleRow(height - 1);
-    for (ZoomTiles& tiles : drawn) {
-      for (DrawnContent& content : tiles.contents) {
-        for (GridCorner& g : content.grid) {
+    const double shift_m = 0.87 * snapToVertexSteps(zoom, snapped);
+    GlbOptions glb = glb_base;
+    glb.position_step_m = zoom.step;
+    const std::size_t n = zoom.tiles.size();
+    std::vector<DrawnTriangles> kept(n);
+    std::vector<std::array<std::int64_t, 2>> spans(n);
+    std::vector<std::vector<std::uint8_t>> bytes(n);
+    std::vector<int> bits(n);
+    ZoomTiles& tiles = drawn[k];
+    tiles.regions.resize(n);
+    tiles.measures.resize(n);
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+      DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
+      tiles.regions[i] = drawnRegion(c.positions, c.triangle_indices);
+      bytes[i] = encodeContent(c, glb, &bits[i]);
+      if (overview_factor > 1) {
+        for (GridCorner& g : c.grid) {
           g.col = overviewToMosaic(g.col, overview_factor);
           g.row = overviewToMosaic(g.row, overview_factor);
           g.at_pole = (g.row == 0 && first_pole) || (g.row == static_cast<double>(height - 1) && last_pole);
         }
       }
-    }
-  }
-
-  std::vector<std::vector<std::array<std::int64_t, 2>>> tile_rows(zooms.size());
-  for (std::size_t k = 0; k < zooms.size(); ++k) {
-    tile_rows[k].resize(drawn[k].contents.size());
-    tbb::parallel_for(std::size_t{0}, drawn[k].contents.size(), [&](std::size_t i) {
-      const DrawnContent& c = drawn[k].contents[i];
-      tile_rows[k][i] = candidateRows(rows, c.positions, c.grid, c.triangle_indices, drawn[k].shift_m);
+      spans[i] = candidateRows(rows, c.positions, c.grid, c.triangle_indices, shift_m);
+      kept[i] = {std::move(c.positions), std::move(c.grid), std::move(c.triangle_indices), shift_m};
     });
+    ZoomTally& tally = tallies[k];
+    tally.step = zoom.step;
+    tally.clusters = zoom.clusters;
+    tally.tiles = n;
+    tally.vertices = mesh.vertices.size();
+    tally.triangles = mesh.triangleCount();
+    tiles.spilled = std::make_unique<SpilledTiles>(spill_dir / ("drawn_zoom_" + std::to_string(zoom.zoom)));
+    for (std::size_t i = 0; i < n; ++i) {
+      const PyramidTile& tile = zoom.tiles[i];
+      tiles.keys.push_back(tile.key);
+      tally.tile_triangles += tile.triangleCount();
+      tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), bytes[i]);
+      tally.position_bits = std::max(tally.position_bits, bits[i]);
+      tiles.spilled->add(kept[i], spans[i]);
+      progress.advance();
+    }
+    std::vector<PyramidTile>().swap(zoom.tiles);
   }
+  progress.endStage();
+  if (release) release();  // the levels, their DEM and globe
+
   const std::int64_t strip_rows = std::max<std::int64_t>(16, window_pixels / std::max<std::int64_t>(width, 1));
-  std::vector<ZoomTally> tallies(zooms.size());
   stats = DemStatistics();
   float low_height = std::numeric_limits<float>::infinity(), high_height = -low_height;
   progress.beginStage("measuring zooms " + std::to_string(zooms.back().zoom) + " to " + std::to_string(zooms.front().zoom) +
@@ -668,11 +697,12 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTi
       ZoomSurface& surface = surfaces[k % 2];
       const ZoomSurface& finer = surfaces[(k + 1) % 2];
       if (k > 0) surface.clear();
-      tbb::parallel_for(std::size_t{0}, drawn[k].contents.size(), [&](std::size_t i) {
-        if (!inStrip(tile_rows[k][i])) return;
-        const DrawnContent& c = drawn[k].contents[i];
-        const DrawnTileMeasure m = measureDrawnTileInStrip(strip, r0, rows, c.positions, c.grid, c.triangle_indices,
-                                                           drawn[k].shift_m, &finer, &surface);
+      const SpilledTiles& spilled = *drawn[k].spilled;
+      tbb::parallel_for(std::size_t{0}, spilled.size(), [&](std::size_t i) {
+        if (!inStrip(spilled.rows(i))) return;
+        const DrawnTriangles t = spilled.load(i);
+        const DrawnTileMeasure m = measureDrawnTileInStrip(strip, r0, rows, t.positions, t.grid, t.triangle_indices,
+                                                           t.shift_m, &finer, &surface);
         DrawTileMeasureSum& sum = drawn[k].measures[i];
         sum.max_error_m = std::max(sum.max_error_m, m.max_error_m);
         sum.finer_difference_m = std::max(sum.finer_difference_m, m.finer_difference_m);
@@ -691,42 +721,21 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTi
     stats.max_height_m = high_height;
   }
 
-  progress.beginStage("writing zooms " + std::to_string(zooms.back().zoom) + " to " + std::to_string(zooms.front().zoom), 0);
   for (std::size_t k = 0; k < zooms.size(); ++k) {
-    const ZoomToWrite& zoom = zooms[k];
-    GlbOptions glb = glb_base;
-    glb.position_step_m = zoom.step;
-    std::vector<std::vector<std::uint8_t>> bytes(zoom.tiles.size());
-    std::vector<Region> regions(zoom.tiles.size());
-    std::vector<int> bits(zoom.tiles.size());
-    tbb::parallel_for(std::size_t{0}, zoom.tiles.size(), [&](std::size_t i) {
-      const DrawnContent& c = drawn[k].contents[i];
-      regions[i] = drawnRegion(c.positions, c.triangle_indices);
-      bytes[i] = encodeContent(c, glb, &bits[i]);
-    });
     ZoomTally& tally = tallies[k];
-    tally.step = zoom.step;
-    tally.clusters = zoom.clusters;
-    tally.tiles = zoom.tiles.size();
-    tally.vertices = zoom.mesh->vertices.size();
-    tally.triangles = zoom.mesh->triangleCount();
-    for (std::size_t i = 0; i < zoom.tiles.size(); ++i) {
-      const PyramidTile& tile = zoom.tiles[i];
-      const DrawTileMeasureSum& m = drawn[k].measures[i];
-      tally.tile_triangles += tile.triangleCount();
-      tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), bytes[i]);
+    const ZoomTiles& tiles = drawn[k];
+    for (std::size_t i = 0; i < tiles.keys.size(); ++i) {
+      const DrawTileMeasureSum& m = tiles.measures[i];
       tally.max_error_m = std::max(tally.max_error_m, m.max_error_m);
-      tally.position_bits = std::max(tally.position_bits, bits[i]);
       TileNode node;
-      node.key = tile.key;
-      node.content_uri = contentUri(tile.key, implicit_tiling);
-      node.region = regions[i];
+      node.key = tiles.keys[i];
+      node.content_uri = contentUri(node.key, implicit_tiling);
+      node.region = tiles.regions[i];
       node.geometric_error_m = roundUpToMicrometre(std::max(m.max_error_m, m.finer_difference_m));
       out.nodes.push_back(std::move(node));
     }
-    out.tallies[zoom.zoom] = tally;
+    out.tallies[zooms[k].zoom] = tally;
   }
-  progress.endStage();
   return out;
 }
 
@@ -1301,6 +1310,8 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
 
   DemStatistics stats;
   const auto release = [&] {
+    std::vector<Level>().swap(levels);
+    std::vector<TileKey>().swap(top_cluster_tiles);
     globe_storage.reset();
     dem_storage.reset();
 #if defined(__GLIBC__)
@@ -1308,8 +1319,8 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
 #endif
   };
   WrittenZooms top = writeZoomsInStrips(zooms, drawn_below, globe, release, mosaic, geoid_grid, lattice_rows,
-                                        options.strip_pixels, factor, glb, options.implicit_tiling, output, stats,
-                                        progress);
+                                        options.strip_pixels, factor, blocks_dir, glb, options.implicit_tiling,
+                                        output, stats, progress);
   for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;
   addNodes(top.nodes);
 
