@@ -571,17 +571,20 @@ class SpilledTiles {
   std::vector<Tile> tiles_;
 };
 
-// The zooms from the blocks' zoom up (finest first; `finer_drawn`: the drawn triangles of the
-// zoom below the first, the blocks', loaded for the strips they meet), measured against the DEM strip by strip: each strip of
-// about `window_pixels` is read, placed on the globe, and every triangle whose candidate
-// pixels (`rows`: the mosaic's LatticeRows) meet it is measured on its pixels, however far the
-// triangle reaches past it; a tile's error is the largest over the strips, each pixel measured
-// and counted (for the RMS) in its own strip, so the figures are those of a measure on the
-// whole DEM. Memory: one strip (28 bytes per pixel) and the zooms' drawn triangles, whatever
-// the mosaic's size. The contents are made first on `globe` (the whole DEM, or its overview of
-// `overview_factor` pixels a side, which the caller may then let go through `release`).
+// The zooms from the blocks' zoom up (finest first), drawn on `globe` (the whole DEM, or its
+// overview of `overview_factor` pixels a side), encoded and written tile by tile (after each
+// zoom, `drawn_zoom(k)` may let its level go), their drawn triangles kept in files in
+// `spill_dir`; then, after `release` (the levels, DEM and globe), measured against the DEM strip
+// by strip: each strip of about `window_pixels` is read and placed on the globe, and every
+// triangle whose candidate pixels (`rows`: the mosaic's LatticeRows) meet it is measured on
+// its pixels, however far the triangle reaches past it (`finer_drawn`: the drawn triangles
+// of the zoom below the first, the blocks'). A tile's error is the largest over the strips,
+// each pixel measured and counted (for the RMS) in its own strip, so the figures are those of
+// a measure on the whole DEM. Memory: one strip (28 bytes per pixel), the tiles of one strip
+// and the tiles' keys and regions, whatever the mosaic's size.
 WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTiles& finer_drawn,
-                                const DemOnGlobe& globe, const std::function<void()>& release, const DemMosaic& mosaic,
+                                const DemOnGlobe& globe, const std::function<void(std::size_t)>& drawn_zoom,
+                                const std::function<void()>& release, const DemMosaic& mosaic,
                                 const GeoidGrid* geoid, const LatticeRows& rows, std::int64_t window_pixels,
                                 std::int32_t overview_factor, const std::filesystem::path& spill_dir,
                                 const GlbOptions& glb_base, bool implicit_tiling, OutputDirectory& output,
@@ -625,44 +628,51 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTi
     GlbOptions glb = glb_base;
     glb.position_step_m = zoom.step;
     const std::size_t n = zoom.tiles.size();
-    std::vector<DrawnTriangles> kept(n);
-    std::vector<std::array<std::int64_t, 2>> spans(n);
-    std::vector<std::vector<std::uint8_t>> bytes(n);
-    std::vector<int> bits(n);
     ZoomTiles& tiles = drawn[k];
     tiles.regions.resize(n);
     tiles.measures.resize(n);
-    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-      DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
-      tiles.regions[i] = drawnRegion(c.positions, c.triangle_indices);
-      bytes[i] = encodeContent(c, glb, &bits[i]);
-      if (overview_factor > 1) {
-        for (GridCorner& g : c.grid) {
-          g.col = overviewToMosaic(g.col, overview_factor);
-          g.row = overviewToMosaic(g.row, overview_factor);
-          g.at_pole = (g.row == 0 && first_pole) || (g.row == static_cast<double>(height - 1) && last_pole);
-        }
-      }
-      spans[i] = candidateRows(rows, c.positions, c.grid, c.triangle_indices, shift_m);
-      kept[i] = {std::move(c.positions), std::move(c.grid), std::move(c.triangle_indices), shift_m};
-    });
+    tiles.spilled = std::make_unique<SpilledTiles>(spill_dir / ("drawn_zoom_" + std::to_string(zoom.zoom)));
     ZoomTally& tally = tallies[k];
     tally.step = zoom.step;
     tally.clusters = zoom.clusters;
     tally.tiles = n;
     tally.vertices = mesh.vertices.size();
     tally.triangles = mesh.triangleCount();
-    tiles.spilled = std::make_unique<SpilledTiles>(spill_dir / ("drawn_zoom_" + std::to_string(zoom.zoom)));
-    for (std::size_t i = 0; i < n; ++i) {
-      const PyramidTile& tile = zoom.tiles[i];
-      tiles.keys.push_back(tile.key);
-      tally.tile_triangles += tile.triangleCount();
-      tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), bytes[i]);
-      tally.position_bits = std::max(tally.position_bits, bits[i]);
-      tiles.spilled->add(kept[i], spans[i]);
-      progress.advance();
+    // A few tiles per thread at a time: drawn and encoded in parallel, then written in order.
+    constexpr std::size_t kChunk = 64;
+    std::vector<DrawnTriangles> kept(kChunk);
+    std::vector<std::array<std::int64_t, 2>> spans(kChunk);
+    std::vector<std::vector<std::uint8_t>> bytes(kChunk);
+    std::vector<int> bits(kChunk);
+    for (std::size_t first = 0; first < n; first += kChunk) {
+      const std::size_t count = std::min(kChunk, n - first);
+      tbb::parallel_for(std::size_t{0}, count, [&](std::size_t j) {
+        const std::size_t i = first + j;
+        DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
+        tiles.regions[i] = drawnRegion(c.positions, c.triangle_indices);
+        bytes[j] = encodeContent(c, glb, &bits[j]);
+        if (overview_factor > 1) {
+          for (GridCorner& g : c.grid) {
+            g.col = overviewToMosaic(g.col, overview_factor);
+            g.row = overviewToMosaic(g.row, overview_factor);
+            g.at_pole = (g.row == 0 && first_pole) || (g.row == static_cast<double>(height - 1) && last_pole);
+          }
+        }
+        spans[j] = candidateRows(rows, c.positions, c.grid, c.triangle_indices, shift_m);
+        kept[j] = {std::move(c.positions), std::move(c.grid), std::move(c.triangle_indices), shift_m};
+      });
+      for (std::size_t j = 0; j < count; ++j) {
+        const PyramidTile& tile = zoom.tiles[first + j];
+        tiles.keys.push_back(tile.key);
+        tally.tile_triangles += tile.triangleCount();
+        tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), bytes[j]);
+        tally.position_bits = std::max(tally.position_bits, bits[j]);
+        tiles.spilled->add(kept[j], spans[j]);
+        progress.advance();
+      }
     }
     std::vector<PyramidTile>().swap(zoom.tiles);
+    if (drawn_zoom) drawn_zoom(k);
   }
   progress.endStage();
   if (release) release();  // the levels, their DEM and globe
@@ -1318,7 +1328,9 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     malloc_trim(0);
 #endif
   };
-  WrittenZooms top = writeZoomsInStrips(zooms, drawn_below, globe, release, mosaic, geoid_grid, lattice_rows,
+  // A level goes once its zoom is drawn (zooms finest first: level k is zoom k's).
+  const auto drawn_zoom = [&](std::size_t k) { levels[k] = Level(); };
+  WrittenZooms top = writeZoomsInStrips(zooms, drawn_below, globe, drawn_zoom, release, mosaic, geoid_grid, lattice_rows,
                                         options.strip_pixels, factor, blocks_dir, glb, options.implicit_tiling,
                                         output, stats, progress);
   for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;
