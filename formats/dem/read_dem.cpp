@@ -335,19 +335,7 @@ std::size_t readInto(const MosaicRaster& raster, const PixelWindow& out_window, 
 
 // The window's grid, every pixel nodata until read.
 DemGrid emptyWindow(const DemMosaic& mosaic, const PixelWindow& window) {
-  DemGrid dem;
-  dem.width = window.width;
-  dem.height = window.height;
-  dem.origin_x = mosaic.origin_x + static_cast<double>(window.col0) * mosaic.pixel_size;
-  dem.origin_y = mosaic.origin_y - static_cast<double>(window.row0) * mosaic.pixel_size;
-  dem.pixel_size_x = mosaic.pixel_size;
-  dem.pixel_size_y = mosaic.pixel_size;
-  dem.col_offset = window.col0;
-  dem.row_offset = window.row0;
-  dem.lattice_origin_x = mosaic.origin_x;
-  dem.lattice_origin_y = mosaic.origin_y;
-  dem.crs_name = mosaic.crs_name;
-  dem.crs_wkt = mosaic.crs_wkt;
+  DemGrid dem = mosaicWindowGrid(mosaic, window);
   dem.heights_m.assign(dem.pixelCount(), DemGrid::kNoData);
   return dem;
 }
@@ -449,6 +437,23 @@ DemMosaic scanDemMosaic(const std::vector<std::string>& paths, Progress* progres
       opaque_vrts.insert(vrt.vrt_path);  // read it through GDAL instead
     }
   }
+}
+
+DemGrid mosaicWindowGrid(const DemMosaic& mosaic, const PixelWindow& window) {
+  DemGrid dem;
+  dem.width = window.width;
+  dem.height = window.height;
+  dem.origin_x = mosaic.origin_x + static_cast<double>(window.col0) * mosaic.pixel_size;
+  dem.origin_y = mosaic.origin_y - static_cast<double>(window.row0) * mosaic.pixel_size;
+  dem.pixel_size_x = mosaic.pixel_size;
+  dem.pixel_size_y = mosaic.pixel_size;
+  dem.col_offset = window.col0;
+  dem.row_offset = window.row0;
+  dem.lattice_origin_x = mosaic.origin_x;
+  dem.lattice_origin_y = mosaic.origin_y;
+  dem.crs_name = mosaic.crs_name;
+  dem.crs_wkt = mosaic.crs_wkt;
+  return dem;
 }
 
 DemGrid readDemWindow(const DemMosaic& mosaic, const PixelWindow& window) {

@@ -59,6 +59,12 @@ DemMosaic scanDemMosaic(const std::vector<std::string>& paths, Progress* progres
 // are placed from the mosaic's corner (DemGrid::col_offset): a pixel two windows share has
 // the same coordinates in both.
 DemGrid readDemWindow(const DemMosaic& mosaic, const PixelWindow& window);
+// The same grid without its heights (heights_m empty): where the window's pixels lie.
+DemGrid mosaicWindowGrid(const DemMosaic& mosaic, const PixelWindow& window);
+// The whole mosaic's grid, without its heights.
+inline DemGrid mosaicGrid(const DemMosaic& mosaic) {
+  return mosaicWindowGrid(mosaic, {0, 0, static_cast<std::int32_t>(mosaic.width), static_cast<std::int32_t>(mosaic.height)});
+}
 
 struct ReadDemOptions {
   // Refuse mosaics larger than this many pixels (the in-memory path); 0 = no limit.

@@ -48,22 +48,6 @@ namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 
-// The mosaic's grid without its heights: what TileFrame needs of the whole mosaic.
-DemGrid mosaicFrameGrid(const DemMosaic& mosaic) {
-  DemGrid grid;
-  grid.width = static_cast<std::int32_t>(mosaic.width);
-  grid.height = static_cast<std::int32_t>(mosaic.height);
-  grid.origin_x = mosaic.origin_x;
-  grid.origin_y = mosaic.origin_y;
-  grid.pixel_size_x = mosaic.pixel_size;
-  grid.pixel_size_y = mosaic.pixel_size;
-  grid.crs_wkt = mosaic.crs_wkt;
-  grid.crs_name = mosaic.crs_name;
-  grid.lattice_origin_x = mosaic.origin_x;
-  grid.lattice_origin_y = mosaic.origin_y;
-  return grid;
-}
-
 // A mosaic pixel coordinate on an overview of `factor` pixels a side per overview pixel
 // (readDemOverview), and back; exact for a power-of-two factor and pixel centres.
 double mosaicToOverview(double coordinate, std::int32_t factor) { return (coordinate + 0.5) / factor - 0.5; }
@@ -1002,7 +986,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     geoid = readGeoidGrid(options.geoid_path.empty() ? kDefaultGeoidPath : options.geoid_path);
   }
   const GeoidGrid* geoid_grid = geoid ? &*geoid : nullptr;
-  const DemGrid frame_grid = mosaicFrameGrid(mosaic);
+  const DemGrid frame_grid = mosaicGrid(mosaic);
   const TileBounds extent = mosaicExtent(mosaic);
   const TileFrame frame(options.scheme, frame_grid, &extent);
   const BlockLayout layout = layBlocks(options, mosaic, frame, block_pixels);
@@ -1069,13 +1053,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     BlockStats stats;
     if (tin.mesh.triangleCount() > 0) {
       stats.triangles = tin.mesh.triangleCount();
-      DemGrid window = mosaicFrameGrid(mosaic);
-      window.col_offset = tin.window.col0;
-      window.row_offset = tin.window.row0;
-      window.width = tin.window.width;
-      window.height = tin.window.height;
-      window.origin_x = mosaic.origin_x + static_cast<double>(tin.window.col0) * mosaic.pixel_size;
-      window.origin_y = mosaic.origin_y - static_cast<double>(tin.window.row0) * mosaic.pixel_size;
+      const DemGrid window = mosaicWindowGrid(mosaic, tin.window);
       TileFrame block_frame(options.scheme, window, &extent);
       layout.follow(block_frame);
       stats.box = schemeBounds(block_frame.toScheme(tin.mesh.vertices));
@@ -1223,7 +1201,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   const std::int32_t factor = overviewFactor(mosaic, options.overview_pixels);
   const std::string top_zooms = "zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(block_zoom);
   std::optional<DemGrid> dem_storage;
-  const DemGrid dem_header = mosaicFrameGrid(mosaic);
+  const DemGrid dem_header = mosaicGrid(mosaic);
   // What the strips need to know of rows outside them (from the whole globe or the overview's strips).
   LatticeRows lattice_rows(static_cast<std::int32_t>(mosaic.width), mosaic.height);
   DemGrid top_grid = dem_header;  // the grid the levels live on, without heights
