@@ -13,7 +13,10 @@
 #include <memory>
 #include <numbers>
 #include <optional>
+#include <set>
 #include <tuple>
+#include <unordered_map>
+#include <bit>
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -555,74 +558,59 @@ class SpilledTiles {
   std::vector<Tile> tiles_;
 };
 
-// The zooms from the blocks' zoom up (finest first), drawn on `globe` (the whole DEM, or its
-// overview of `overview_factor` pixels a side), encoded and written tile by tile (after each
-// zoom, `drawn_zoom(k)` may let its level go), their drawn triangles kept in files in
-// `spill_dir`; then, after `release` (the levels, DEM and globe), measured against the DEM strip
-// by strip: each strip of about `window_pixels` is read and placed on the globe, and every
-// triangle whose candidate pixels (`rows`: the mosaic's LatticeRows) meet it is measured on
-// its pixels, however far the triangle reaches past it (`finer_drawn`: the drawn triangles
-// of the zoom below the first, the blocks'). A tile's error is the largest over the strips,
-// each pixel measured and counted (for the RMS) in its own strip, so the figures are those of
-// a measure on the whole DEM. Memory: one strip (28 bytes per pixel), the tiles of one strip
-// and the tiles' keys and regions, whatever the mosaic's size.
-WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTiles& finer_drawn,
-                                const DemOnGlobe& globe, const std::function<void(std::size_t)>& drawn_zoom,
-                                const std::function<void()>& release, const DemMosaic& mosaic,
-                                const GeoidGrid* geoid, const LatticeRows& rows, std::int64_t window_pixels,
-                                std::int32_t overview_factor, const std::filesystem::path& spill_dir,
-                                const GlbOptions& glb_base, bool implicit_tiling, OutputDirectory& output,
-                                DemStatistics& stats, Progress& progress) {
-  WrittenZooms out;
-  const std::int64_t width = mosaic.width, height = mosaic.height;
-  // On an overview, a vertex at a pole is one on a pole row of the mosaic (an overview's rows
-  // lie off the poles).
-  bool first_pole = false, last_pole = false;
-  if (overview_factor > 1) {
-    const auto poleRow = [&](std::int64_t row) {
-      const DemGrid line = readDemWindow(mosaic, {0, row, static_cast<std::int32_t>(width), 1});
-      return DemOnGlobe(line, geoid, nullptr).poleRow(0);
-    };
-    first_pole = poleRow(0);
-    last_pole = poleRow(height - 1);
+// The zooms from the blocks' zoom up. Each piece's tiles are drawn on the top stage's globe
+// (the whole DEM, or its overview of `overview_factor` pixels a side), encoded and written at
+// once (draw), their drawn triangles kept in files in `spill_dir`; then, once that globe is
+// gone, every zoom is measured against the DEM strip by strip (measure): each strip of about
+// `window_pixels` is read and placed on the globe, and every triangle whose candidate pixels
+// (`rows`: the mosaic's LatticeRows) meet it is measured on its pixels, however far the
+// triangle reaches past it (`finer_drawn`: the drawn triangles of the zoom below the first,
+// the blocks'). A tile's error is the largest over the strips, each pixel measured and counted
+// (for the RMS) in its own strip, so the figures are those of a measure on the whole DEM.
+// Memory: one strip (28 bytes per pixel), the tiles of one strip and every tile's key and
+// region, whatever the mosaic's size.
+class CoarseZooms {
+ public:
+  CoarseZooms(const DemMosaic& mosaic, const GeoidGrid* geoid, const LatticeRows& rows, std::int32_t overview_factor,
+              std::filesystem::path spill_dir, const GlbOptions& glb, bool implicit_tiling, OutputDirectory& output)
+      : mosaic_(mosaic), geoid_(geoid), rows_(rows), factor_(overview_factor), spill_dir_(std::move(spill_dir)),
+        glb_(glb), implicit_tiling_(implicit_tiling), output_(output) {
+    if (factor_ > 1) {
+      // On an overview, a vertex at a pole is one on a pole row of the mosaic (an overview's
+      // rows lie off the poles).
+      const auto poleRow = [&](std::int64_t row) {
+        const DemGrid line = readDemWindow(mosaic, {0, row, static_cast<std::int32_t>(mosaic.width), 1});
+        return DemOnGlobe(line, geoid, nullptr).poleRow(0);
+      };
+      first_pole_ = poleRow(0);
+      last_pole_ = poleRow(mosaic.height - 1);
+    }
   }
-  // Each zoom's tiles are drawn, encoded and written at once; what the strips measure of them
-  // waits in a file.
-  struct ZoomTiles {
-    std::unique_ptr<SpilledTiles> spilled;
-    std::vector<TileKey> keys;
-    std::vector<Region> regions;
-    std::vector<DrawTileMeasureSum> measures;
-  };
-  std::vector<ZoomTiles> drawn(zooms.size());
-  std::vector<ZoomTally> tallies(zooms.size());
-  tbb::enumerable_thread_specific<ContentScratch> content_scratch;
-  std::size_t tile_count = 0;
-  for (const ZoomToWrite& zoom : zooms) tile_count += zoom.tiles.size();
-  progress.beginStage("drawing and writing zooms " + std::to_string(zooms.back().zoom) + " to " +
-                          std::to_string(zooms.front().zoom),
-                      tile_count);
-  for (std::size_t k = 0; k < zooms.size(); ++k) {
-    ZoomToWrite& zoom = zooms[k];
+
+  // Draws, encodes and writes `zoom`'s tiles (64 at a time), keeping their triangles for
+  // measure(); `zoom.tiles` is emptied.
+  void draw(ZoomToWrite& zoom, const DemOnGlobe& globe) {
     const TinMesh& mesh = *zoom.mesh;
     std::vector<EcefPoint> snapped(mesh.vertices.size());
     globe.place(mesh.vertices, {}, snapped);
     const std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
     const double shift_m = 0.87 * snapToVertexSteps(zoom, snapped);
-    GlbOptions glb = glb_base;
+    GlbOptions glb = glb_;
     glb.position_step_m = zoom.step;
-    const std::size_t n = zoom.tiles.size();
-    ZoomTiles& tiles = drawn[k];
-    tiles.regions.resize(n);
-    tiles.measures.resize(n);
-    tiles.spilled = std::make_unique<SpilledTiles>(spill_dir / ("drawn_zoom_" + std::to_string(zoom.zoom)));
-    ZoomTally& tally = tallies[k];
+    ZoomTiles& tiles = zooms_[zoom.zoom];
+    if (!tiles.spilled) {
+      tiles.spilled = std::make_unique<SpilledTiles>(spill_dir_ / ("drawn_zoom_" + std::to_string(zoom.zoom)));
+    }
+    const std::size_t n = zoom.tiles.size(), before = tiles.keys.size();
+    tiles.regions.resize(before + n);
+    tiles.measures.resize(before + n);
+    ZoomTally& tally = tiles.tally;
     tally.step = zoom.step;
-    tally.clusters = zoom.clusters;
-    tally.tiles = n;
-    tally.vertices = mesh.vertices.size();
-    tally.triangles = mesh.triangleCount();
-    // A few tiles per thread at a time: drawn and encoded in parallel, then written in order.
+    tally.clusters += zoom.clusters;
+    tally.tiles += n;
+    tally.vertices += mesh.vertices.size();
+    tally.triangles += mesh.triangleCount();
+    const std::int64_t height = mosaic_.height;
     constexpr std::size_t kChunk = 64;
     std::vector<DrawnTriangles> kept(kChunk);
     std::vector<std::array<std::int64_t, 2>> spans(kChunk);
@@ -632,106 +620,132 @@ WrittenZooms writeZoomsInStrips(std::vector<ZoomToWrite>& zooms, const SpilledTi
       const std::size_t count = std::min(kChunk, n - first);
       tbb::parallel_for(std::size_t{0}, count, [&](std::size_t j) {
         const std::size_t i = first + j;
-        DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
-        tiles.regions[i] = drawnRegion(c.positions, c.triangle_indices);
+        DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch_.local());
+        tiles.regions[before + i] = drawnRegion(c.positions, c.triangle_indices);
         bytes[j] = encodeContent(c, glb, &bits[j]);
-        if (overview_factor > 1) {
+        if (factor_ > 1) {
           for (GridCorner& g : c.grid) {
-            g.col = overviewToMosaic(g.col, overview_factor);
-            g.row = overviewToMosaic(g.row, overview_factor);
-            g.at_pole = (g.row == 0 && first_pole) || (g.row == static_cast<double>(height - 1) && last_pole);
+            g.col = overviewToMosaic(g.col, factor_);
+            g.row = overviewToMosaic(g.row, factor_);
+            g.at_pole = (g.row == 0 && first_pole_) || (g.row == static_cast<double>(height - 1) && last_pole_);
           }
         }
-        spans[j] = candidateRows(rows, c.positions, c.grid, c.triangle_indices, shift_m);
+        spans[j] = candidateRows(rows_, c.positions, c.grid, c.triangle_indices, shift_m);
         kept[j] = {std::move(c.positions), std::move(c.grid), std::move(c.triangle_indices), shift_m};
       });
       for (std::size_t j = 0; j < count; ++j) {
         const PyramidTile& tile = zoom.tiles[first + j];
         tiles.keys.push_back(tile.key);
         tally.tile_triangles += tile.triangleCount();
-        tally.bytes += output.writeFile(contentUri(tile.key, implicit_tiling), bytes[j]);
+        tally.bytes += output_.writeFile(contentUri(tile.key, implicit_tiling_), bytes[j]);
         tally.position_bits = std::max(tally.position_bits, bits[j]);
         tiles.spilled->add(kept[j], spans[j]);
-        progress.advance();
       }
     }
     std::vector<PyramidTile>().swap(zoom.tiles);
-    if (drawn_zoom) drawn_zoom(k);
   }
-  progress.endStage();
-  if (release) release();  // the levels, their DEM and globe
 
-  const std::int64_t strip_rows = std::max<std::int64_t>(16, window_pixels / std::max<std::int64_t>(width, 1));
-  stats = DemStatistics();
-  float low_height = std::numeric_limits<float>::infinity(), high_height = -low_height;
-  progress.beginStage("measuring zooms " + std::to_string(zooms.back().zoom) + " to " + std::to_string(zooms.front().zoom) +
-                          " strip by strip (" + std::to_string(strip_rows) + " rows each)",
-                      static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
-  for (std::int64_t r0 = 0; r0 < height; r0 += strip_rows) {
-    const std::int64_t r1 = std::min(height, r0 + strip_rows);
-    const DemGrid window = readDemWindow(mosaic, {0, r0, static_cast<std::int32_t>(width), static_cast<std::int32_t>(r1 - r0)});
-    for (std::int32_t row = 0; row < window.height; ++row) {
-      for (std::int32_t col = 0; col < window.width; ++col) {
-        const float h = window.heightAt(col, row);
-        if (std::isnan(h)) continue;
-        ++stats.valid_pixels;
-        low_height = std::min(low_height, h);
-        high_height = std::max(high_height, h);
+  // Every zoom drawn, measured strip by strip: their tallies and tile nodes.
+  WrittenZooms measure(const SpilledTiles& finer_drawn, std::int64_t window_pixels, DemStatistics& stats,
+                       Progress& progress) {
+    WrittenZooms out;
+    const std::int64_t width = mosaic_.width, height = mosaic_.height;
+    std::vector<ZoomTiles*> zooms;  // finest first
+    for (auto it = zooms_.rbegin(); it != zooms_.rend(); ++it) zooms.push_back(&it->second);
+    const std::int64_t strip_rows = std::max<std::int64_t>(16, window_pixels / std::max<std::int64_t>(width, 1));
+    stats = DemStatistics();
+    float low_height = std::numeric_limits<float>::infinity(), high_height = -low_height;
+    progress.beginStage("measuring zooms " + std::to_string(zooms_.begin()->first) + " to " +
+                            std::to_string(zooms_.rbegin()->first) + " strip by strip (" + std::to_string(strip_rows) +
+                            " rows each)",
+                        static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
+    for (std::int64_t r0 = 0; r0 < height; r0 += strip_rows) {
+      const std::int64_t r1 = std::min(height, r0 + strip_rows);
+      const DemGrid window =
+          readDemWindow(mosaic_, {0, r0, static_cast<std::int32_t>(width), static_cast<std::int32_t>(r1 - r0)});
+      for (std::int32_t row = 0; row < window.height; ++row) {
+        for (std::int32_t col = 0; col < window.width; ++col) {
+          const float h = window.heightAt(col, row);
+          if (std::isnan(h)) continue;
+          ++stats.valid_pixels;
+          low_height = std::min(low_height, h);
+          high_height = std::max(high_height, h);
+        }
       }
-    }
-    const DemOnGlobe strip(window, geoid, nullptr);
-    const auto inStrip = [&](const std::array<std::int64_t, 2>& span) { return span[1] >= r0 && span[0] < r1; };
-    std::array<ZoomSurface, 2> surfaces{ZoomSurface(window.pixelCount()), ZoomSurface(window.pixelCount())};
-    tbb::parallel_for(std::size_t{0}, finer_drawn.size(), [&](std::size_t i) {
-      if (!inStrip(finer_drawn.rows(i))) return;
-      const DrawnTriangles t = finer_drawn.load(i);
-      measureDrawnTileInStrip(strip, r0, rows, t.positions, t.grid, t.triangle_indices, t.shift_m, nullptr, &surfaces[1]);
-    });
-    for (std::size_t k = 0; k < zooms.size(); ++k) {
-      ZoomSurface& surface = surfaces[k % 2];
-      const ZoomSurface& finer = surfaces[(k + 1) % 2];
-      if (k > 0) surface.clear();
-      const SpilledTiles& spilled = *drawn[k].spilled;
-      tbb::parallel_for(std::size_t{0}, spilled.size(), [&](std::size_t i) {
-        if (!inStrip(spilled.rows(i))) return;
-        const DrawnTriangles t = spilled.load(i);
-        const DrawnTileMeasure m = measureDrawnTileInStrip(strip, r0, rows, t.positions, t.grid, t.triangle_indices,
-                                                           t.shift_m, &finer, &surface);
-        DrawTileMeasureSum& sum = drawn[k].measures[i];
-        sum.max_error_m = std::max(sum.max_error_m, m.max_error_m);
-        sum.finer_difference_m = std::max(sum.finer_difference_m, m.finer_difference_m);
+      const DemOnGlobe strip(window, geoid_, nullptr);
+      const auto inStrip = [&](const std::array<std::int64_t, 2>& span) { return span[1] >= r0 && span[0] < r1; };
+      std::array<ZoomSurface, 2> surfaces{ZoomSurface(window.pixelCount()), ZoomSurface(window.pixelCount())};
+      tbb::parallel_for(std::size_t{0}, finer_drawn.size(), [&](std::size_t i) {
+        if (!inStrip(finer_drawn.rows(i))) return;
+        const DrawnTriangles t = finer_drawn.load(i);
+        measureDrawnTileInStrip(strip, r0, rows_, t.positions, t.grid, t.triangle_indices, t.shift_m, nullptr,
+                                &surfaces[1]);
       });
-      for (std::size_t p = 0; p < window.pixelCount(); ++p) {
-        if (!surface.drawn(p)) continue;
-        tallies[k].sum_squares += surface.error(p) * surface.error(p);
-        ++tallies[k].drawn_pixels;
+      for (std::size_t k = 0; k < zooms.size(); ++k) {
+        ZoomSurface& surface = surfaces[k % 2];
+        const ZoomSurface& finer = surfaces[(k + 1) % 2];
+        if (k > 0) surface.clear();
+        ZoomTiles& tiles = *zooms[k];
+        const SpilledTiles& spilled = *tiles.spilled;
+        tbb::parallel_for(std::size_t{0}, spilled.size(), [&](std::size_t i) {
+          if (!inStrip(spilled.rows(i))) return;
+          const DrawnTriangles t = spilled.load(i);
+          const DrawnTileMeasure m = measureDrawnTileInStrip(strip, r0, rows_, t.positions, t.grid, t.triangle_indices,
+                                                             t.shift_m, &finer, &surface);
+          DrawTileMeasureSum& sum = tiles.measures[i];
+          sum.max_error_m = std::max(sum.max_error_m, m.max_error_m);
+          sum.finer_difference_m = std::max(sum.finer_difference_m, m.finer_difference_m);
+        });
+        for (std::size_t p = 0; p < window.pixelCount(); ++p) {
+          if (!surface.drawn(p)) continue;
+          tiles.tally.sum_squares += surface.error(p) * surface.error(p);
+          ++tiles.tally.drawn_pixels;
+        }
       }
+      progress.advance();
     }
-    progress.advance();
-  }
-  progress.endStage();
-  if (stats.valid_pixels > 0) {
-    stats.min_height_m = low_height;
-    stats.max_height_m = high_height;
+    progress.endStage();
+    if (stats.valid_pixels > 0) {
+      stats.min_height_m = low_height;
+      stats.max_height_m = high_height;
+    }
+    for (auto& [zoom, tiles] : zooms_) {
+      ZoomTally& tally = tiles.tally;
+      for (std::size_t i = 0; i < tiles.keys.size(); ++i) {
+        const DrawTileMeasureSum& m = tiles.measures[i];
+        tally.max_error_m = std::max(tally.max_error_m, m.max_error_m);
+        TileNode node;
+        node.key = tiles.keys[i];
+        node.content_uri = contentUri(node.key, implicit_tiling_);
+        node.region = tiles.regions[i];
+        node.geometric_error_m = roundUpToMicrometre(std::max(m.max_error_m, m.finer_difference_m));
+        out.nodes.push_back(std::move(node));
+      }
+      out.tallies[zoom] = tally;
+    }
+    return out;
   }
 
-  for (std::size_t k = 0; k < zooms.size(); ++k) {
-    ZoomTally& tally = tallies[k];
-    const ZoomTiles& tiles = drawn[k];
-    for (std::size_t i = 0; i < tiles.keys.size(); ++i) {
-      const DrawTileMeasureSum& m = tiles.measures[i];
-      tally.max_error_m = std::max(tally.max_error_m, m.max_error_m);
-      TileNode node;
-      node.key = tiles.keys[i];
-      node.content_uri = contentUri(node.key, implicit_tiling);
-      node.region = tiles.regions[i];
-      node.geometric_error_m = roundUpToMicrometre(std::max(m.max_error_m, m.finer_difference_m));
-      out.nodes.push_back(std::move(node));
-    }
-    out.tallies[zooms[k].zoom] = tally;
-  }
-  return out;
-}
+ private:
+  struct ZoomTiles {
+    std::unique_ptr<SpilledTiles> spilled;
+    std::vector<TileKey> keys;
+    std::vector<Region> regions;
+    std::vector<DrawTileMeasureSum> measures;
+    ZoomTally tally;
+  };
+  const DemMosaic& mosaic_;
+  const GeoidGrid* geoid_;
+  const LatticeRows& rows_;
+  std::int32_t factor_;
+  std::filesystem::path spill_dir_;
+  GlbOptions glb_;
+  bool implicit_tiling_;
+  OutputDirectory& output_;
+  bool first_pole_ = false, last_pole_ = false;
+  std::map<std::int32_t, ZoomTiles> zooms_;
+  tbb::enumerable_thread_specific<ContentScratch> content_scratch_;
+};
 
 // Per vertex of each zoom (finest first), the grid it snaps to: its zoom's own, or where it is
 // on a tile outline of its zoom and of the next coarser one (the same vertex, unmoved) the
@@ -773,6 +787,76 @@ struct BlockHandover {
   std::vector<TileKey> cluster_tiles;   // per such cluster: its tile at Zb + 1
   WrittenZooms written;
 };
+
+// A piece of the merge tree from Zb up: the level shown at key.zoom over the tile `key`, in the
+// top stage's grid (the mosaic's pixels or its overview's), with the clusters it inherited.
+struct MergePiece {
+  TileKey key;
+  TinMesh level;
+  std::vector<std::int32_t> inherited;  // per face: its cluster of the level at key.zoom + 1
+  std::vector<TileKey> cluster_tiles;   // per such cluster: its tile at key.zoom + 1
+  // Where a piece waits until its parent merges it: its key, and how to load it.
+  struct Source {
+    TileKey key;
+    std::function<MergePiece()> load;
+  };
+};
+
+constexpr char kMergeMagic[8] = {'T', 'T', 'M', 'E', 'R', 'G', 'E', '1'};
+
+void writeMergePieceFile(const MergePiece& piece, const std::string& path) {
+  RecordWriter out;
+  out.bytes.assign(kMergeMagic, sizeof kMergeMagic);
+  out.put(piece.key);
+  out.putArray(piece.level.vertices);
+  out.putArray(piece.level.triangle_indices);
+  out.putArray(piece.inherited);
+  out.putArray(piece.cluster_tiles);
+  writeRecordFile(path, out.bytes);
+}
+
+MergePiece readMergePieceFile(const std::string& path) {
+  const std::string bytes = readRecordFile(path);
+  RecordReader in{path, bytes};
+  in.expectMagic(kMergeMagic);
+  MergePiece piece;
+  piece.key = in.get<TileKey>();
+  piece.level.vertices = in.getArray<GridPoint>();
+  piece.level.triangle_indices = in.getArray<std::uint32_t>();
+  piece.inherited = in.getArray<std::int32_t>();
+  piece.cluster_tiles = in.getArray<TileKey>();
+  in.expectEnd();
+  return piece;
+}
+
+// Up to four pieces as one mesh over `parent`: a vertex two of them share (on their common
+// border, locked in both, so at the very same position) becomes one; clusters renumbered.
+MergePiece joinPieces(std::vector<MergePiece> children, TileKey parent) {
+  MergePiece joined;
+  joined.key = parent;
+  struct Hash {
+    std::size_t operator()(const std::pair<std::uint64_t, std::uint64_t>& p) const {
+      return std::hash<std::uint64_t>()(p.first * 0x9e3779b97f4a7c15ull ^ p.second);
+    }
+  };
+  std::unordered_map<std::pair<std::uint64_t, std::uint64_t>, std::uint32_t, Hash> number_of;
+  for (MergePiece& child : children) {
+    std::vector<std::uint32_t> numbers(child.level.vertices.size());
+    for (std::size_t v = 0; v < numbers.size(); ++v) {
+      const GridPoint& p = child.level.vertices[v];
+      const auto [it, added] = number_of.try_emplace(
+          {std::bit_cast<std::uint64_t>(p.col), std::bit_cast<std::uint64_t>(p.row)},
+          static_cast<std::uint32_t>(joined.level.vertices.size()));
+      if (added) joined.level.vertices.push_back(p);
+      numbers[v] = it->second;
+    }
+    for (const std::uint32_t v : child.level.triangle_indices) joined.level.triangle_indices.push_back(numbers[v]);
+    const auto offset = static_cast<std::int32_t>(joined.cluster_tiles.size());
+    for (const std::int32_t c : child.inherited) joined.inherited.push_back(offset + c);
+    joined.cluster_tiles.insert(joined.cluster_tiles.end(), child.cluster_tiles.begin(), child.cluster_tiles.end());
+  }
+  return joined;
+}
 
 // The level options of the build (as runPipeline sets them) for levels shown from `top_zoom` down.
 LevelOptions buildLevelOptions(const BuildOptions& options, const DemOnGlobe& globe, const TileFrame& frame,
@@ -1230,12 +1314,13 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     lattice_rows.collect(globe, 0);
     lattice_rows.finish();
   }
-  // 3. The levels at Zb stitched into one mesh: the finest level of the rest.
-  progress.beginStage("joining the blocks' levels at zoom " + std::to_string(block_zoom), block_count);
-  TinMesh top_mesh;
-  FacePartition top_inherited;
-  std::vector<TileKey> top_cluster_tiles;
-  BlockVertexNumbering numbering;
+  // 3. What the blocks wrote (tallies, tile nodes, their tiles at Zb + 1, which the strips
+  // measure zoom Zb against), then the rest of the pyramid by 2 x 2 merges: the pieces of a
+  // zoom (first the blocks, tiles of Zb) are joined four by four into their parent tile, whose
+  // mesh is re-partitioned (the borders between the four move), simplified one level with the
+  // parent's outline locked, and its clusters assigned to the four tiles, which are written;
+  // the parent's coarser level is the piece of the next zoom, up to the root.
+  progress.beginStage("reading what the blocks wrote", block_count);
   SpilledTiles drawn_below(blocks_dir / "drawn_below");  // the blocks' tiles at Zb + 1
   std::map<std::int32_t, ZoomTally> tallies;
   std::map<std::tuple<int, int, int>, TileNode> nodes;
@@ -1245,72 +1330,145 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
       nodes[{key.zoom, key.y, key.x}] = std::move(node);
     }
   };
-  for (std::size_t j = 0; j < grid.rowCount(); ++j) {
-    for (std::size_t i = 0; i < grid.columnCount(); ++i) {
-      BlockHandover h = readHandoverFile(blockPath(i, j, ".build"), options.implicit_tiling);
-      const std::vector<std::uint32_t> numbers =
-          numbering.number(i, j, h.window, h.level.vertices, grid, [&](double col, double row, double height) {
-            top_mesh.vertices.push_back({col, row, height});
-            return static_cast<std::uint32_t>(top_mesh.vertices.size() - 1);
-          });
-      for (const std::uint32_t v : h.level.triangle_indices) top_mesh.triangle_indices.push_back(numbers[v]);
-      const auto offset = static_cast<std::int32_t>(top_cluster_tiles.size());
-      for (const std::int32_t c : h.inherited) top_inherited.cluster_of_face.push_back(offset + c);
-      top_cluster_tiles.insert(top_cluster_tiles.end(), h.cluster_tiles.begin(), h.cluster_tiles.end());
-      for (const auto& [zoom, tally] : h.written.tallies) tallies[zoom].add(tally);
-      addNodes(h.written.nodes);
-      for (const DrawnTriangles& t : h.written.coarsest) {
-        drawn_below.add(t, candidateRows(lattice_rows, t.positions, t.grid, t.triangle_indices, t.shift_m));
-      }
-      progress.advance();
+  std::vector<MergePiece::Source> pieces;  // of the zoom being merged, ordered by (y, x)
+  for (std::size_t b = 0; b < block_count; ++b) {
+    const std::size_t i = b % grid.columnCount(), j = b / grid.columnCount();
+    BlockHandover h = readHandoverFile(blockPath(i, j, ".build"), options.implicit_tiling);
+    for (const auto& [zoom, tally] : h.written.tallies) tallies[zoom].add(tally);
+    addNodes(h.written.nodes);
+    for (const DrawnTriangles& t : h.written.coarsest) {
+      drawn_below.add(t, candidateRows(lattice_rows, t.positions, t.grid, t.triangle_indices, t.shift_m));
     }
-  }
-  top_inherited.cluster_count = static_cast<std::int32_t>(top_cluster_tiles.size());
-  progress.endStage();
-  if (factor > 1) {
-    for (GridPoint& p : top_mesh.vertices) {
-      p.col = mosaicToOverview(p.col, factor);
-      p.row = mosaicToOverview(p.row, factor);
+    if (h.level.triangleCount() > 0) {
+      pieces.push_back({layout.keys[b], [&, i, j, b] {
+                          BlockHandover block = readHandoverFile(blockPath(i, j, ".build"), options.implicit_tiling);
+                          MergePiece piece;
+                          piece.key = layout.keys[b];
+                          piece.level = std::move(block.level);
+                          for (GridPoint& p : piece.level.vertices) {
+                            p.col = mosaicToOverview(static_cast<double>(block.window.col0) + p.col, factor);
+                            p.row = mosaicToOverview(static_cast<double>(block.window.row0) + p.row, factor);
+                          }
+                          piece.inherited = std::move(block.inherited);
+                          piece.cluster_tiles = std::move(block.cluster_tiles);
+                          return piece;
+                        }});
     }
+    progress.advance();
   }
-
-  TileFrame top_frame(options.scheme, top_grid, factor == 1 ? nullptr : &extent);
-  layout.follow(top_frame, factor);
-  const auto top_levels = static_cast<std::size_t>(block_zoom - plan.min_zoom);
-  std::vector<Level> levels;
-  if (top_levels > 0) {
-    std::vector<std::int32_t> clusters(plan.clusters_per_level.begin() + static_cast<std::ptrdiff_t>(block_levels),
-                                       plan.clusters_per_level.end());
-    LevelOptions level_options =
-        buildLevelOptions(options, globe, top_frame, block_zoom, static_cast<std::int32_t>(block_levels), clusters);
-    level_options.coarser_levels = static_cast<std::int32_t>(top_levels);
-    levels = buildLevels(dem, std::move(top_mesh), level_options, {}, progress);
-  } else {
-    levels.emplace_back();
-    levels[0].mesh = std::move(top_mesh);
-  }
-  levels[0].inherited_partition = std::move(top_inherited);
-  progress.beginStage("assigning clusters to tiles", 0);
-  std::vector<ZoomToWrite> zooms =
-      assignZooms(options, top_frame, levels, levels.size(), block_zoom, top_cluster_tiles, top_steps);
-  for (ZoomToWrite& zoom : zooms) zoom.vertex_step.assign(zoom.mesh->vertices.size(), top_step);
   progress.endStage();
-
-  DemStatistics stats;
-  const auto release = [&] {
-    std::vector<Level>().swap(levels);
-    std::vector<TileKey>().swap(top_cluster_tiles);
-    globe_storage.reset();
-    dem_storage.reset();
-#if defined(__GLIBC__)
-    malloc_trim(0);
-#endif
+  const auto byPlace = [](const MergePiece::Source& p, const MergePiece::Source& q) {
+    return std::tie(p.key.y, p.key.x) < std::tie(q.key.y, q.key.x);
   };
-  // A level goes once its zoom is drawn (zooms finest first: level k is zoom k's).
-  const auto drawn_zoom = [&](std::size_t k) { levels[k] = Level(); };
-  WrittenZooms top = writeZoomsInStrips(zooms, drawn_below, globe, drawn_zoom, release, mosaic, geoid_grid, lattice_rows,
-                                        options.strip_pixels, factor, blocks_dir, glb, options.implicit_tiling,
-                                        output, stats, progress);
+  std::sort(pieces.begin(), pieces.end(), byPlace);
+
+  CoarseZooms coarse(mosaic, geoid_grid, lattice_rows, factor, blocks_dir, glb, options.implicit_tiling, output);
+  std::size_t merges = 0;  // every piece of every zoom from Zb up
+  {
+    std::set<std::tuple<int, int, int>> parents;
+    for (const MergePiece::Source& piece : pieces) {
+      for (std::int32_t z = block_zoom; z >= plan.min_zoom; --z) {
+        const int shift = block_zoom - z;
+        parents.insert({z, piece.key.y >> shift, piece.key.x >> shift});
+      }
+    }
+    merges = parents.size();
+  }
+  progress.beginStage("merging the blocks 2 x 2 from zoom " + std::to_string(block_zoom) + " to " +
+                          std::to_string(plan.min_zoom),
+                      merges);
+  for (std::int32_t z = block_zoom;; --z) {
+    // A piece's zoom z, assigned to its tiles, and (`coarser`: z is not the root) its level at
+    // z - 1, the parent's piece. Pieces are made a batch at a time in parallel (each on its
+    // own, so in any order), then written in order.
+    struct Made {
+      TileKey parent;
+      std::vector<Level> levels;
+      std::vector<TileKey> cluster_tiles;  // then: those of the level at z's clusters
+      std::vector<ZoomToWrite> zooms;
+    };
+    const bool coarser = z > plan.min_zoom;
+    const auto make = [&](MergePiece piece, TileKey parent, Made& made) {
+      TileFrame frame(options.scheme, top_grid, &extent);
+      layout.follow(frame, factor);
+      frame.keepInside(coarser ? parent : piece.key);
+      made.parent = parent;
+      std::vector<Level>& levels = made.levels;
+      const FacePartition inherited{std::move(piece.inherited), static_cast<std::int32_t>(piece.cluster_tiles.size())};
+      if (coarser) {
+        const std::size_t tiles = frame.tilesIntersecting(schemeBounds(frame.toScheme(piece.level.vertices)), z).size();
+        LevelOptions level_options =
+            buildLevelOptions(options, globe, frame, z, plan.max_zoom - z,
+                              {options.clusters_per_tile * static_cast<std::int32_t>(std::max<std::size_t>(tiles, 1))});
+        level_options.coarser_levels = 1;
+        Progress quiet;
+        levels = buildLevels(dem, std::move(piece.level), level_options, {}, quiet);
+      } else {
+        levels.emplace_back();
+        levels[0].mesh = std::move(piece.level);
+      }
+      levels[0].inherited_partition = inherited;
+      if (coarser && levels.size() < 2) {  // too small to split: kept whole, one cluster
+        levels[0].partition = {std::vector<std::int32_t>(levels[0].mesh.triangleCount(), 0), 1};
+        levels.emplace_back();
+        levels[1].mesh = levels[0].mesh;
+        levels[1].inherited_partition = levels[0].partition;
+      }
+      made.cluster_tiles = std::move(piece.cluster_tiles);
+      made.zooms = assignZooms(options, frame, levels, 1, z, made.cluster_tiles, top_steps);
+      made.zooms[0].vertex_step.assign(made.zooms[0].mesh->vertices.size(), top_step);
+    };
+    // The pieces of the next zoom: (y, x) of a parent and its children's indices.
+    std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::size_t>> children_of;
+    for (std::size_t k = 0; k < pieces.size(); ++k) {
+      const int shift = coarser ? 1 : 0;
+      children_of[{pieces[k].key.y >> shift, pieces[k].key.x >> shift}].push_back(k);
+    }
+    const std::vector<std::pair<std::pair<std::int32_t, std::int32_t>, std::vector<std::size_t>>> groups(
+        children_of.begin(), children_of.end());
+    std::vector<MergePiece::Source> parents;
+    constexpr std::size_t kBatch = 8;
+    for (std::size_t first = 0; first < groups.size(); first += kBatch) {
+      std::vector<Made> batch(std::min(kBatch, groups.size() - first));
+      tbb::parallel_for(std::size_t{0}, batch.size(), [&](std::size_t g) {
+        const auto& [place, kids] = groups[first + g];
+        if (!coarser) {
+          make(pieces[kids[0]].load(), pieces[kids[0]].key, batch[g]);
+          return;
+        }
+        const TileKey parent{z - 1, place.second, place.first};
+        std::vector<MergePiece> children;
+        for (const std::size_t k : kids) children.push_back(pieces[k].load());
+        make(joinPieces(std::move(children), parent), parent, batch[g]);
+      });
+      for (Made& made : batch) {
+        coarse.draw(made.zooms[0], globe);
+        progress.advance();
+        if (!coarser) continue;
+        MergePiece up;
+        up.key = made.parent;
+        up.level = std::move(made.levels[1].mesh);
+        up.inherited = std::move(made.levels[1].inherited_partition.cluster_of_face);
+        up.cluster_tiles = std::move(made.cluster_tiles);
+        const std::string path = (blocks_dir / ("merge_" + std::to_string(up.key.zoom) + "_" + std::to_string(up.key.x) +
+                                                "_" + std::to_string(up.key.y)))
+                                     .string();
+        writeMergePieceFile(up, path);
+        parents.push_back({up.key, [path] { return readMergePieceFile(path); }});
+        made = Made();
+      }
+    }
+    if (!coarser) break;
+    pieces = std::move(parents);  // ordered by (y, x), as the groups
+  }
+  progress.endStage();
+  globe_storage.reset();
+  dem_storage.reset();
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+  DemStatistics stats;
+  WrittenZooms top = coarse.measure(drawn_below, options.strip_pixels, stats, progress);
   for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;
   addNodes(top.nodes);
 
