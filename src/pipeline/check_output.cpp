@@ -19,6 +19,7 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <span>
 #include <sstream>
 
 #include "formats/dem/read_dem.h"
@@ -163,11 +164,49 @@ struct DecodeScratch {
   std::vector<std::uint8_t> at_pole;
   std::vector<GeodeticOfVertex> geodetic;
   std::vector<GridCorner> grid;
+  std::vector<int> seam_votes;
   std::vector<GridPoint> lattice;
   std::vector<std::uint32_t> outline_index;
   OutlineScratch outline;
   std::vector<std::array<std::uint32_t, 2>> edges;
 };
+
+// A DEM round the whole circle of longitude: where its first and last columns meet (the
+// antimeridian of a global raster), a vertex may decode on either side of it. Near a pole a
+// position step spans more than a column (ETOPO5 at 2.5': 1.7 m between row 0's columns, 2 m
+// steps at the coarse zooms): a vertex of the last column can decode at longitude 180 exactly,
+// which the wrap into the DEM's 360 degrees puts at column -0.5, the raster's width from its
+// pixel, and its outline edges and triangles then span the whole grid (no pixel of the seam
+// row between them is inside them in the grid; as drawn, the chords bulge poleward past it).
+// The TIN has no triangle across the seam, so the vertex is on the side of its triangles'
+// other corners (votes: +1 for a corner in the eastern half, -1 for one in the western); a
+// vertex past the last column (col > width - 1) or before the first (col < 0) is moved by the
+// width to that side. One with no such corner is left where it decoded.
+void unwrapSeamVertices(std::int32_t width, std::span<const std::uint32_t> indices,
+                        std::span<const std::uint8_t> at_pole, std::span<GridCorner> grid, std::vector<int>& votes) {
+  const double last = width - 1.0;
+  const auto pastAnEnd = [&](std::uint32_t v) { return !at_pole[v] && (grid[v].col < 0 || grid[v].col > last); };
+  bool any = false;
+  for (std::size_t v = 0; v < grid.size() && !any; ++v) any = pastAnEnd(static_cast<std::uint32_t>(v));
+  if (!any) return;
+  votes.assign(grid.size(), 0);
+  for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::uint32_t v = indices[t + k];
+      if (!pastAnEnd(v)) continue;
+      for (std::size_t j = 0; j < 3; ++j) {
+        const std::uint32_t u = indices[t + j];
+        if (j == k || at_pole[u] || pastAnEnd(u)) continue;
+        votes[v] += grid[u].col > width / 2.0 ? 1 : -1;
+      }
+    }
+  }
+  for (std::size_t v = 0; v < grid.size(); ++v) {
+    if (!pastAnEnd(static_cast<std::uint32_t>(v))) continue;
+    if (votes[v] > 0 && grid[v].col < 0) grid[v].col += width;
+    if (votes[v] < 0 && grid[v].col > last) grid[v].col -= width;
+  }
+}
 
 // Decodes a tile (see the header) and measures it: its outline, its coverage in the grid and
 // as drawn, its region, its drawn error against the DEM and against the finer zoom's surface
@@ -232,6 +271,7 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
     }
   }
   const auto& idx = mesh.triangle_indices;
+  if (to_dem.geographic() && globe.wrapsLongitude()) unwrapSeamVertices(dem.width, idx, at_pole, grid, scratch.seam_votes);
 
   // The outline, and its vertices back on their pixel centres.
   outlineEdges(idx, n, scratch.outline, scratch.edges);
@@ -253,7 +293,11 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
   const double tolerance_m = 0.5 * std::sqrt(3.0) * widest_step_m + kRoundTripTolerance_m;
   for (const std::uint32_t v : outline_vertices) {
     if (at_pole[v]) continue;
-    const double col = std::round(grid[v].col), row = std::round(grid[v].row);
+    // The nearest pixel centre: one inside the grid (a vertex half a column or row outside
+    // it, as quantisation can decode one of the data's border vertices, is not put on a
+    // column or row the DEM does not have).
+    const double col = std::clamp(std::round(grid[v].col), 0.0, dem.width - 1.0);
+    const double row = std::clamp(std::round(grid[v].row), 0.0, dem.height - 1.0);
     const auto spacing_row = static_cast<std::int32_t>(std::clamp(row, 0.0, dem.height - 1.0));
     // The cap is a tenth of the pixel's north-south size in both directions: near a pole a
     // geographic DEM's columns are metres apart (6.8 m at 89.96 deg for 5'), closer than the
