@@ -175,5 +175,9 @@ TEST_SUITE("integration") {
     CHECK(report.left_out_pixels == 0);
     CHECK(report.uncovered_valid_pixels == 0);
     CHECK(report.missing_border_vertices == 0);
+    // The same in strips of 16 rows (6 strips, each with the rows its tallest triangle reaches).
+    CheckOptions strips = check;
+    strips.strip_pixels = 1;
+    test::checkSameReport(checkOutput(dir / "out", strips, quiet), report);
   }
 }
