@@ -226,4 +226,36 @@ void checkSeamless(const CheckReport& report) {
   CHECK(report.ok());
 }
 
+// Every figure and problem of two check reports, exactly.
+void checkSameReport(const CheckReport& a, const CheckReport& b) {
+  CHECK(a.tiles == b.tiles);
+  CHECK(a.zooms == b.zooms);
+  CHECK(a.footprint_pixels == b.footprint_pixels);
+  CHECK(a.uncovered_valid_pixels == b.uncovered_valid_pixels);
+  CHECK(a.left_out_pixels == b.left_out_pixels);
+  CHECK(a.pole_vertices == b.pole_vertices);
+  CHECK(a.cuts == b.cuts);
+  CHECK(a.cuts_with_holes == b.cuts_with_holes);
+  CHECK(a.hole_pixels == b.hole_pixels);
+  CHECK(a.unbalanced_cuts == b.unbalanced_cuts);
+  CHECK(a.unbalanced_cuts_with_holes == b.unbalanced_cuts_with_holes);
+  CHECK(a.unbalanced_hole_pixels == b.unbalanced_hole_pixels);
+  CHECK(a.neighbour_pairs == b.neighbour_pairs);
+  CHECK(a.missing_border_vertices == b.missing_border_vertices);
+  CHECK(a.moved_outline_vertices == b.moved_outline_vertices);
+  CHECK(a.shared_border_vertices == b.shared_border_vertices);
+  CHECK(a.shared_vertex_gaps == b.shared_vertex_gaps);
+  CHECK(a.worst_shared_vertex_gap_m == b.worst_shared_vertex_gap_m);
+  CHECK(a.measured_pixels == b.measured_pixels);
+  CHECK(a.overlap_pixels == b.overlap_pixels);
+  CHECK(a.overlap_disagreements == b.overlap_disagreements);
+  CHECK(a.worst_overlap_ratio == b.worst_overlap_ratio);
+  CHECK(a.dishonest_errors == b.dishonest_errors);
+  CHECK(a.worst_error_ratio == b.worst_error_ratio);
+  CHECK(a.error_order_violations == b.error_order_violations);
+  CHECK(a.region_violations == b.region_violations);
+  CHECK(a.content_region_violations == b.content_region_violations);
+  CHECK(a.problems == b.problems);
+}
+
 }  // namespace terratiles::test

@@ -64,6 +64,9 @@ std::set<std::array<double, 6>> checkStitchedTin(const std::string& path, const 
 // position, no error above its geometricError, regions holding their content.
 void checkSeamless(const CheckReport& report);
 
+// Every figure and problem of two check reports, exactly (doctest checks).
+void checkSameReport(const CheckReport& a, const CheckReport& b);
+
 // Every regular file below `dir` whose path relative to it starts with one of `prefixes`
 // (all when empty), as relative path -> bytes.
 std::map<std::string, std::string> filesUnder(const std::filesystem::path& dir,

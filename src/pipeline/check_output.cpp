@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <climits>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -19,6 +20,7 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <span>
 #include <sstream>
 
 #include "formats/dem/read_dem.h"
@@ -61,10 +63,12 @@ struct CheckTile {
   std::array<double, 6> region{};  // west, south, east, north (rad), min, max height (m)
   int parent = -1;
   std::vector<int> children;
-  // Valid DEM pixels the content covers (with repeats), from its decoding until the coverage
-  // classes take them in.
-  std::vector<std::uint32_t> pixels;
-  DrawnTileMeasure measure;           // the decoded content against the DEM and the finer zoom
+  // The rows of the DEM's grid its triangles span (as decoded), and its tallest triangle's.
+  std::array<double, 2> rows{1e300, -1e300};
+  std::int64_t tallest_rows = 0;
+  // The decoded content against the DEM and the finer zoom: the largest errors over the strips,
+  // the pixels summed over them (each in its own strip).
+  DrawnTileMeasure measure;
   bool region_holds_content = true;
   std::string region_excess;  // when not: the bound the content passes most, and by how much
   // The content's outline: its vertices on boundary edges (an edge of one triangle), numbered
@@ -156,149 +160,154 @@ class ToDemCrs {
   tbb::enumerable_thread_specific<std::unique_ptr<OGRCoordinateTransformation>> per_thread_;
 };
 
-// Per thread scratch for decodeAndMeasure, reused from tile to tile.
+// A DEM round the whole circle of longitude: where its first and last columns meet (the
+// antimeridian of a global raster), a vertex may decode on either side of it. Near a pole a
+// position step spans more than a column (ETOPO5 at 2.5': 1.7 m between row 0's columns, 2 m
+// steps at the coarse zooms): a vertex of the last column can decode at longitude 180 exactly,
+// which the wrap into the DEM's 360 degrees puts at column -0.5, the raster's width from its
+// pixel, and its outline edges and triangles then span the whole grid (no pixel of the seam
+// row between them is inside them in the grid; as drawn, the chords bulge poleward past it).
+// The TIN has no triangle across the seam, so the vertex is on the side of its triangles'
+// other corners (votes: +1 for a corner in the eastern half, -1 for one in the western); a
+// vertex past the last column (col > width - 1) or before the first (col < 0) is moved by the
+// width to that side. One with no such corner is left where it decoded.
+void unwrapSeamVertices(std::int32_t width, std::span<const std::uint32_t> indices,
+                        std::span<const std::uint8_t> at_pole, std::span<GridCorner> grid, std::vector<int>& votes) {
+  const double last = width - 1.0;
+  const auto pastAnEnd = [&](std::uint32_t v) { return !at_pole[v] && (grid[v].col < 0 || grid[v].col > last); };
+  bool any = false;
+  for (std::size_t v = 0; v < grid.size() && !any; ++v) any = pastAnEnd(static_cast<std::uint32_t>(v));
+  if (!any) return;
+  votes.assign(grid.size(), 0);
+  for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::uint32_t v = indices[t + k];
+      if (!pastAnEnd(v)) continue;
+      for (std::size_t j = 0; j < 3; ++j) {
+        const std::uint32_t u = indices[t + j];
+        if (j == k || at_pole[u] || pastAnEnd(u)) continue;
+        votes[v] += grid[u].col > width / 2.0 ? 1 : -1;
+      }
+    }
+  }
+  for (std::size_t v = 0; v < grid.size(); ++v) {
+    if (!pastAnEnd(static_cast<std::uint32_t>(v))) continue;
+    if (votes[v] > 0 && grid[v].col < 0) grid[v].col += width;
+    if (votes[v] < 0 && grid[v].col > last) grid[v].col -= width;
+  }
+}
+
+// Per thread scratch for decoding tiles, reused from tile to tile: the decoded tile (decodeTile)
+// and what a strip makes of it (measureInStrip).
 struct DecodeScratch {
   std::vector<double> xs, ys, zs;
   std::vector<int> transformed;
-  std::vector<std::uint8_t> at_pole;
+  std::vector<int> seam_votes;
+  OutlineScratch outline;
+  // The tile as decoded: ECEF (what a renderer draws), WGS84 as decoded (before the geoid), its
+  // place in the DEM's grid (rows of the whole raster), at a pole or not; its triangles; its
+  // outline edges (mesh indices) and outline vertices numbered in the order of their index.
+  std::vector<EcefPoint> ecef;
   std::vector<GeodeticOfVertex> geodetic;
   std::vector<GridCorner> grid;
-  std::vector<GridPoint> lattice;
-  std::vector<std::uint32_t> outline_index;
-  OutlineScratch outline;
+  std::vector<std::uint8_t> at_pole;
+  std::vector<std::uint32_t> indices;
   std::vector<std::array<std::uint32_t, 2>> edges;
+  std::vector<std::uint32_t> outline_index;     // per vertex: its outline number, or kNotOnOutline
+  std::vector<std::uint32_t> outline_vertices;  // per outline vertex: its mesh index
+  // In a strip: grid positions in the window's rows, with the outline back on pixel centres;
+  // the pixels covered and met.
+  std::vector<GridCorner> window_grid;
+  std::vector<GridPoint> lattice;
+  std::vector<std::uint32_t> covered;
 };
 
-// Decodes a tile (see the header) and measures it: its outline, its coverage in the grid and
-// as drawn, its region, its drawn error against the DEM and against the finer zoom's surface
-// (adding its own to `surface`). Needs the finer zoom's surface complete, no other tile.
-void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelBoxes& boxes, const GeoidGrid* geoid,
-                      ToDemCrs& to_dem, double widest_step_m, const ZoomSurface* finer, ZoomSurface& surface,
-                      CheckTile& tile, DecodeScratch& scratch) {
-  const DemGrid& dem = globe.dem();
-  DecodedGlb decoded = readGlbFile((dir / tile.uri).string());
+// Decodes a tile into `s` (see DecodeScratch): every vertex back from ECEF to the DEM's grid
+// (`frame`: the whole raster's, its heights unused).
+void decodeTile(const fs::path& dir, const DemGrid& frame, bool wraps_longitude, const GeoidGrid* geoid,
+                ToDemCrs& to_dem, const std::string& uri, DecodeScratch& s) {
+  DecodedGlb decoded = readGlbFile((dir / uri).string());
   GlbMesh& mesh = decoded.mesh;
   const auto& earth = GeographicLib::Geocentric::WGS84();
   const std::size_t n = mesh.vertexCount();
-  std::vector<EcefPoint> ecef(n);
-  std::vector<double>& xs = scratch.xs;
-  std::vector<double>& ys = scratch.ys;
-  std::vector<double>& zs = scratch.zs;
-  xs.resize(n);
-  ys.resize(n);
-  zs.resize(n);
-  std::vector<std::uint8_t>& at_pole = scratch.at_pole;
-  at_pole.assign(n, 0);
-  std::vector<GeodeticOfVertex>& geodetic = scratch.geodetic;  // as decoded (before the geoid)
-  geodetic.resize(n);
+  s.ecef.resize(n);
+  s.xs.resize(n);
+  s.ys.resize(n);
+  s.zs.resize(n);
+  s.at_pole.assign(n, 0);
+  s.geodetic.resize(n);
   for (std::size_t v = 0; v < n; ++v) {
     // glTF y-up back to ECEF z-up: what a renderer draws, in double.
     const double gx = mesh.translation[0] + mesh.positions[3 * v];
     const double gy = mesh.translation[1] + mesh.positions[3 * v + 1];
     const double gz = mesh.translation[2] + mesh.positions[3 * v + 2];
-    ecef[v] = {gx, -gz, gy};
+    s.ecef[v] = {gx, -gz, gy};
     double lat = 0, lon = 0, h = 0;
-    earth.Reverse(ecef[v].x, ecef[v].y, ecef[v].z, lat, lon, h);
-    geodetic[v] = {lat, lon, h};
-    at_pole[v] = std::fabs(lat) >= kPoleDeg;
+    earth.Reverse(s.ecef[v].x, s.ecef[v].y, s.ecef[v].z, lat, lon, h);
+    s.geodetic[v] = {lat, lon, h};
+    s.at_pole[v] = std::fabs(lat) >= kPoleDeg;
     if (geoid) {
       const std::optional<double> undulation = geoid->undulationAt(lon, lat);
-      if (!undulation) throw Error(ErrorCode::Input, tile.uri + ": a vertex lies outside the geoid grid");
+      if (!undulation) throw Error(ErrorCode::Input, uri + ": a vertex lies outside the geoid grid");
       h -= *undulation;
     }
-    xs[v] = lon;
-    ys[v] = lat;
-    zs[v] = h;
+    s.xs[v] = lon;
+    s.ys[v] = lat;
+    s.zs[v] = h;
   }
-  std::vector<int>& transformed = scratch.transformed;
-  transformed.assign(n, 1);
-  if (n > 0 && !to_dem.local().Transform(n, xs.data(), ys.data(), zs.data(), transformed.data())) {
-    throw Error(ErrorCode::Input, tile.uri + ": vertices cannot be transformed back to " + dem.crs_name);
+  s.transformed.assign(n, 1);
+  if (n > 0 && !to_dem.local().Transform(n, s.xs.data(), s.ys.data(), s.zs.data(), s.transformed.data())) {
+    throw Error(ErrorCode::Input, uri + ": vertices cannot be transformed back to " + frame.crs_name);
   }
   // A geographic DEM: longitudes back into the DEM's 360 degrees (lon 180 and -180 are one
   // meridian).
-  std::vector<GridCorner>& grid = scratch.grid;
-  grid.resize(n);
+  s.grid.resize(n);
   for (std::size_t v = 0; v < n; ++v) {
     if (to_dem.geographic()) {
-      while (xs[v] < dem.origin_x) xs[v] += 360;
-      while (xs[v] >= dem.origin_x + 360) xs[v] -= 360;
+      while (s.xs[v] < frame.origin_x) s.xs[v] += 360;
+      while (s.xs[v] >= frame.origin_x + 360) s.xs[v] -= 360;
     }
-    grid[v] = {(xs[v] - dem.origin_x) / dem.pixel_size_x - 0.5, (dem.origin_y - ys[v]) / dem.pixel_size_y - 0.5,
-               at_pole[v] != 0};
-    if (at_pole[v]) {
-      ++tile.pole_vertices;
-      grid[v].row = std::round(grid[v].row);  // the pole row; its column means nothing
-    }
+    s.grid[v] = {(s.xs[v] - frame.origin_x) / frame.pixel_size_x - 0.5,
+                 (frame.origin_y - s.ys[v]) / frame.pixel_size_y - 0.5, s.at_pole[v] != 0};
+    if (s.at_pole[v]) s.grid[v].row = std::round(s.grid[v].row);  // the pole row; its column means nothing
   }
-  const auto& idx = mesh.triangle_indices;
-
-  // The outline, and its vertices back on their pixel centres.
-  outlineEdges(idx, n, scratch.outline, scratch.edges);
-  // Outline vertices numbered in the order of their mesh index.
-  std::vector<std::uint32_t>& outline_index = scratch.outline_index;
-  outline_index.assign(n, kNotOnOutline);
-  for (const auto& edge : scratch.edges) outline_index[edge[0]] = outline_index[edge[1]] = 0;
-  std::vector<std::uint32_t> outline_vertices;  // mesh index of each outline vertex
+  s.indices = std::move(mesh.triangle_indices);
+  if (to_dem.geographic() && wraps_longitude) unwrapSeamVertices(frame.width, s.indices, s.at_pole, s.grid, s.seam_votes);
+  // The outline, its vertices numbered in the order of their mesh index.
+  outlineEdges(s.indices, n, s.outline, s.edges);
+  s.outline_index.assign(n, kNotOnOutline);
+  for (const auto& edge : s.edges) s.outline_index[edge[0]] = s.outline_index[edge[1]] = 0;
+  s.outline_vertices.clear();
   for (std::uint32_t v = 0; v < n; ++v) {
-    if (outline_index[v] == kNotOnOutline) continue;
-    outline_index[v] = static_cast<std::uint32_t>(outline_vertices.size());
-    outline_vertices.push_back(v);
+    if (s.outline_index[v] == kNotOnOutline) continue;
+    s.outline_index[v] = static_cast<std::uint32_t>(s.outline_vertices.size());
+    s.outline_vertices.push_back(v);
   }
-  tile.boundary_edges.reserve(scratch.edges.size());
-  for (const auto& edge : scratch.edges) tile.boundary_edges.push_back({outline_index[edge[0]], outline_index[edge[1]]});
-  std::vector<GridPoint>& lattice = scratch.lattice;
-  lattice.resize(n);
-  for (std::size_t v = 0; v < n; ++v) lattice[v] = {grid[v].col, grid[v].row, 0};
-  const double tolerance_m = 0.5 * std::sqrt(3.0) * widest_step_m + kRoundTripTolerance_m;
-  for (const std::uint32_t v : outline_vertices) {
-    if (at_pole[v]) continue;
-    const double col = std::round(grid[v].col), row = std::round(grid[v].row);
-    const auto spacing_row = static_cast<std::int32_t>(std::clamp(row, 0.0, dem.height - 1.0));
-    // The cap is a tenth of the pixel's north-south size in both directions: near a pole a
-    // geographic DEM's columns are metres apart (6.8 m at 89.96 deg for 5'), closer than the
-    // grid of a coarse zoom's outline snaps a vertex (half a step's diagonal), so a cap of a
-    // tenth of a column would leave the data's own border vertices off their pixel centres.
-    const double north_south_m = globe.rowSpacing(std::min(spacing_row, dem.height - 2));  // the last row has none below
-    const double column_tolerance_px =
-        std::min(kLatticeTolerance_px * north_south_m, tolerance_m) / globe.columnSpacing(spacing_row);
-    const double row_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.rowSpacing(spacing_row));
-    if (std::fabs(grid[v].col - col) > column_tolerance_px || std::fabs(grid[v].row - row) > row_tolerance_px) {
-      ++tile.off_lattice;
-      continue;
-    }
-    lattice[v].col = col;
-    lattice[v].row = row;
-  }
+}
 
-  // Coverage: the pixels inside its triangles in the grid and the pixels whose verticals
-  // meet its triangles as drawn (a triangle with a pole vertex has no place in the grid; a
-  // long chord strays from its grid triangle by its bulge, far from a pole too).
-  std::vector<std::uint32_t>& covered = tile.pixels;
-  const auto rasterise = [&](const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-    coveredValidPixels(dem, a, b, c, covered);
-  };
-  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-    const std::uint32_t corner[3] = {idx[t], idx[t + 1], idx[t + 2]};
-    const int poles = at_pole[corner[0]] + at_pole[corner[1]] + at_pole[corner[2]];
-    if (poles == 0) {
-      rasterise(lattice[corner[0]], lattice[corner[1]], lattice[corner[2]]);
-      continue;
+// What a tile is apart from the DEM, from its decoding: its vertices at a pole, the rows its
+// triangles span (and the tallest triangle's), whether its region holds its content, and its
+// outline (vertex_grid as decoded; measureInStrip puts each vertex back on its pixel centre).
+void describeTile(const fs::path& dir, const DemGrid& frame, bool wraps_longitude, const GeoidGrid* geoid,
+                  ToDemCrs& to_dem, CheckTile& tile, DecodeScratch& s) {
+  decodeTile(dir, frame, wraps_longitude, geoid, to_dem, tile.uri, s);
+  tile.pole_vertices = static_cast<std::size_t>(std::count(s.at_pole.begin(), s.at_pole.end(), 1));
+  // The rows every triangle spans (as writeZoomsInStrips takes them: the grid positions the
+  // measure is given).
+  double low = 1e300, high = -1e300;
+  for (std::size_t t = 0; t + 2 < s.indices.size(); t += 3) {
+    double a = 1e300, b = -1e300;
+    for (std::size_t c = 0; c < 3; ++c) {
+      a = std::min(a, s.grid[s.indices[t + c]].row);
+      b = std::max(b, s.grid[s.indices[t + c]].row);
     }
-    if (poles > 1) continue;
-    // One corner at a pole: in the grid, the triangle is the quad between the other two
-    // corners' meridians, from their edge to the pole row (a chord from a pole runs along a
-    // meridian).
-    int k = 0;
-    while (!at_pole[corner[k]]) ++k;
-    const GridPoint& v1 = lattice[corner[(k + 1) % 3]];
-    const GridPoint& v2 = lattice[corner[(k + 2) % 3]];
-    if (std::fabs(v1.col - v2.col) > dem.width / 2.0) continue;  // across the seam: left to the verticals
-    const double pole_row = lattice[corner[k]].row;
-    rasterise({v1.col, pole_row, 0}, {v2.col, pole_row, 0}, v2);
-    rasterise({v1.col, pole_row, 0}, v2, v1);
+    tile.tallest_rows = std::max(tile.tallest_rows, static_cast<std::int64_t>(std::ceil(b - a)));
+    low = std::min(low, a);
+    high = std::max(high, b);
   }
-  const Region content = drawnRegion(ecef, idx, geodetic);
+  tile.rows = {low, high};
+
+  const Region content = drawnRegion(s.ecef, s.indices, s.geodetic);
   const auto& r = tile.region;
   tile.region_holds_content = content.empty || (content.west_rad >= r[0] && content.south_rad >= r[1] &&
                                                 content.east_rad <= r[2] && content.north_rad <= r[3] &&
@@ -319,20 +328,140 @@ void decodeAndMeasure(const fs::path& dir, const DemOnGlobe& globe, const PixelB
     tile.region_excess = text;
   }
 
-  const std::size_t m = outline_vertices.size();
+  const std::size_t m = s.outline_vertices.size();
+  tile.boundary_edges.reserve(s.edges.size());
+  for (const auto& edge : s.edges) tile.boundary_edges.push_back({s.outline_index[edge[0]], s.outline_index[edge[1]]});
   tile.vertex_grid.resize(m);
   tile.vertex_ecef.resize(m);
   tile.vertex_at_pole.resize(m);
   for (std::size_t k = 0; k < m; ++k) {
-    const std::uint32_t v = outline_vertices[k];
-    tile.vertex_grid[k] = {lattice[v].col, lattice[v].row};
-    tile.vertex_ecef[k] = {ecef[v].x, ecef[v].y, ecef[v].z};
-    tile.vertex_at_pole[k] = at_pole[v];
+    const std::uint32_t v = s.outline_vertices[k];
+    tile.vertex_grid[k] = {s.grid[v].col, s.grid[v].row};
+    tile.vertex_ecef[k] = {s.ecef[v].x, s.ecef[v].y, s.ecef[v].z};
+    tile.vertex_at_pole[k] = s.at_pole[v];
+  }
+}
+
+// One strip of the DEM's rows, [first_row, end_row) of the raster, and the window read for it
+// (from window_row; every row a triangle meeting the strip spans, and one more either side).
+struct Strip {
+  const DemOnGlobe& globe;  // the window's
+  const PixelBoxes& boxes;
+  std::int32_t raster_height = 0;
+  std::int64_t window_row = 0;
+  std::int64_t first_row = 0, end_row = 0;
+  double widest_step_m = 0;
+};
+
+// A tile drawn over a strip (see the header): its outline back on pixel centres, its coverage
+// in the grid and as drawn, its drawn error against the DEM and against the finer zoom's
+// surface (adding its own to `surface`), each pixel counted in its own strip only. The outline
+// vertices whose pixel row is the strip's are recorded in the tile (tile.vertex_grid,
+// off_lattice). Leaves the covered pixels of the strip's own rows in s.covered (indices from
+// the strip's first row, with repeats). Needs the finer zoom's surface of the window complete.
+void measureInStrip(const fs::path& dir, const DemGrid& frame, const GeoidGrid* geoid, ToDemCrs& to_dem,
+                    const Strip& strip, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile,
+                    DecodeScratch& s) {
+  const DemOnGlobe& globe = strip.globe;
+  const DemGrid& dem = globe.dem();  // the window
+  decodeTile(dir, frame, globe.wrapsLongitude(), geoid, to_dem, tile.uri, s);
+  const std::size_t n = s.grid.size();
+  const double shift = static_cast<double>(strip.window_row);
+  s.window_grid.resize(n);
+  s.lattice.resize(n);
+  for (std::size_t v = 0; v < n; ++v) {
+    s.window_grid[v] = {s.grid[v].col, s.grid[v].row - shift, s.grid[v].at_pole};
+    s.lattice[v] = {s.grid[v].col, s.grid[v].row - shift, 0};
   }
 
+  // The outline back on its pixel centres, where the window has the spacings the tolerance
+  // takes: the pixel's row and the next one (the window's last row has no row spacing), which
+  // it has for every vertex of a triangle meeting the strip's rows.
+  const std::int64_t height = strip.raster_height;
+  const std::int64_t window_end = strip.window_row + dem.height;
+  const double tolerance_m = 0.5 * std::sqrt(3.0) * strip.widest_step_m + kRoundTripTolerance_m;
+  for (std::size_t k = 0; k < s.outline_vertices.size(); ++k) {
+    const std::uint32_t v = s.outline_vertices[k];
+    if (s.at_pole[v]) continue;
+    // The nearest pixel centre: one inside the grid (a vertex half a column or row outside
+    // it, as quantisation can decode one of the data's border vertices, is not put on a
+    // column or row the DEM does not have).
+    const double col = std::clamp(std::round(s.grid[v].col), 0.0, frame.width - 1.0);
+    const double row = std::clamp(std::round(s.grid[v].row), 0.0, height - 1.0);
+    const auto spacing_row = static_cast<std::int64_t>(row);
+    const std::int64_t below = std::min(spacing_row, height - 2);  // the last row has none below
+    if (spacing_row < strip.window_row || below + 1 >= window_end) continue;
+    const bool own = spacing_row >= strip.first_row && spacing_row < strip.end_row;
+    // The cap is a tenth of the pixel's north-south size in both directions: near a pole a
+    // geographic DEM's columns are metres apart (6.8 m at 89.96 deg for 5'), closer than the
+    // grid of a coarse zoom's outline snaps a vertex (half a step's diagonal), so a cap of a
+    // tenth of a column would leave the data's own border vertices off their pixel centres.
+    const double north_south_m = globe.rowSpacing(static_cast<std::int32_t>(below - strip.window_row));
+    const auto window_spacing_row = static_cast<std::int32_t>(spacing_row - strip.window_row);
+    const double column_tolerance_px =
+        std::min(kLatticeTolerance_px * north_south_m, tolerance_m) / globe.columnSpacing(window_spacing_row);
+    const double row_tolerance_px = std::min(kLatticeTolerance_px, tolerance_m / globe.rowSpacing(window_spacing_row));
+    if (std::fabs(s.grid[v].col - col) > column_tolerance_px || std::fabs(s.grid[v].row - row) > row_tolerance_px) {
+      if (own) ++tile.off_lattice;
+      continue;
+    }
+    s.lattice[v].col = col;
+    s.lattice[v].row = row - shift;
+    if (own) tile.vertex_grid[k] = {col, row};
+  }
+
+  // Coverage: the pixels inside its triangles in the grid and the pixels whose verticals
+  // meet its triangles as drawn (a triangle with a pole vertex has no place in the grid; a
+  // long chord strays from its grid triangle by its bulge, far from a pole too).
+  std::vector<std::uint32_t>& covered = s.covered;
+  covered.clear();
+  const auto rasterise = [&](const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+    coveredValidPixels(dem, a, b, c, covered);
+  };
+  const auto& idx = s.indices;
+  for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
+    const std::uint32_t corner[3] = {idx[t], idx[t + 1], idx[t + 2]};
+    const int poles = s.at_pole[corner[0]] + s.at_pole[corner[1]] + s.at_pole[corner[2]];
+    if (poles == 0) {
+      rasterise(s.lattice[corner[0]], s.lattice[corner[1]], s.lattice[corner[2]]);
+      continue;
+    }
+    if (poles > 1) continue;
+    // One corner at a pole: in the grid, the triangle is the quad between the other two
+    // corners' meridians, from their edge to the pole row (a chord from a pole runs along a
+    // meridian).
+    int k = 0;
+    while (!s.at_pole[corner[k]]) ++k;
+    const GridPoint& v1 = s.lattice[corner[(k + 1) % 3]];
+    const GridPoint& v2 = s.lattice[corner[(k + 2) % 3]];
+    if (std::fabs(v1.col - v2.col) > dem.width / 2.0) continue;  // across the seam: left to the verticals
+    const double pole_row = s.lattice[corner[k]].row;
+    rasterise({v1.col, pole_row, 0}, {v2.col, pole_row, 0}, v2);
+    rasterise({v1.col, pole_row, 0}, v2, v1);
+  }
   // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them); the pixels
   // met join its coverage.
-  tile.measure = measureDrawnTile(globe, ecef, grid, idx, 1e-3, finer, &surface, &covered, &boxes);
+  const std::size_t grid_covered = covered.size();
+  const DrawnTileMeasure measure =
+      measureDrawnTile(globe, s.ecef, s.window_grid, idx, 1e-3, finer, &surface, &covered, &strip.boxes);
+  // The largest errors over the window are the tile's over the strip's rows or below them
+  // (the window's other rows see part of the finer zoom's surface, whose difference is no
+  // larger than all of it); its pixels are counted in their own strip.
+  tile.measure.max_error_m = std::max(tile.measure.max_error_m, measure.max_error_m);
+  tile.measure.finer_difference_m = std::max(tile.measure.finer_difference_m, measure.finer_difference_m);
+  const std::size_t first = static_cast<std::size_t>(strip.first_row - strip.window_row) * static_cast<std::size_t>(dem.width);
+  const std::size_t end = static_cast<std::size_t>(strip.end_row - strip.window_row) * static_cast<std::size_t>(dem.width);
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < covered.size(); ++i) {
+    const std::uint32_t p = covered[i];
+    if (p < first || p >= end) continue;
+    if (i >= grid_covered) {
+      ++tile.measure.hits;
+      if (finer && finer->drawn(p)) ++tile.measure.finer_hits;
+    }
+    covered[kept++] = static_cast<std::uint32_t>(p - first);
+  }
+  covered.resize(kept);
 }
 
 // Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that
@@ -495,6 +624,25 @@ struct PixelClasses {
   std::size_t tiles_added = 0;
 };
 
+// The coverage classes of all strips (PixelClasses::countFootprint's figures of each), one
+// strip's after the other's: class 0 is the empty set, each strip's other classes keep their
+// parents (created before them) and tiles; a cut's holes are summed over them all.
+struct CoverageClasses {
+  void append(const PixelClasses& strip) {
+    const std::size_t base = parent.size() - 1;  // a strip's class c > 0 becomes base + c
+    footprint_pixels[0] += strip.footprint_pixels[0];
+    for (std::size_t c = 1; c < strip.parent.size(); ++c) {
+      parent.push_back(strip.parent[c] == 0 ? 0 : base + strip.parent[c]);
+      tile.push_back(strip.tile[c]);
+      footprint_pixels.push_back(strip.footprint_pixels[c]);
+    }
+  }
+
+  std::vector<std::size_t> parent{0};
+  std::vector<std::size_t> tile{0};
+  std::vector<std::size_t> footprint_pixels{0};
+};
+
 bool isAncestor(int ancestor, int tile, const std::vector<CheckTile>& tiles) {
   for (int t = tile; t >= 0; t = tiles[static_cast<std::size_t>(t)].parent) {
     if (t == ancestor) return true;
@@ -516,18 +664,33 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   // Implicit output: build.json holds the same tree as an explicit tileset.
   addTile(build.contains("explicit_tileset") ? build["explicit_tileset"].at("root") : tileset.at("root"), -1, tiles);
 
-  std::vector<std::string> inputs = build.at("inputs").get<std::vector<std::string>>();
-  const DemGrid dem = readDem(inputs, "reading the DEM", progress);
+  if (options.strip_pixels <= 0) {
+    throw Error(ErrorCode::Usage, "--strip-pixels is " + std::to_string(options.strip_pixels) +
+                                      ", expected a positive number of pixels per strip (default 16000000)");
+  }
+  const std::vector<std::string> inputs = build.at("inputs").get<std::vector<std::string>>();
+  const DemMosaic mosaic = scanDemMosaic(inputs, &progress);
+  if (mosaic.width > INT32_MAX || mosaic.height > INT32_MAX) {
+    throw Error(ErrorCode::Input, "the mosaic of the inputs is " + std::to_string(mosaic.width) + " x " +
+                                      std::to_string(mosaic.height) + " pixels; at most 2^31 - 1 either way");
+  }
+  const auto width = static_cast<std::int32_t>(mosaic.width), height = static_cast<std::int32_t>(mosaic.height);
+  // The whole raster's frame (where its grid lies, without its heights).
+  DemGrid frame = readDemWindow(mosaic, {0, 0, width, 0});
+  frame.height = height;
+  progress.beginStage("reading the geoid", 0);
   std::optional<GeoidGrid> geoid;
   if (build.value("heights", std::string("orthometric")) == "orthometric") {
     geoid = readGeoidGrid(build.at("geoid").get<std::string>());
   }
-  progress.endStage();
-  // The stage holds the transformation's set-up too (a few tenths of a second in PROJ).
-  progress.beginStage("placing the DEM's pixels on the globe", 0);
-  const DemOnGlobe globe(dem, geoid ? &*geoid : nullptr);
-  const PixelBoxes boxes(globe);
-  ToDemCrs to_dem(dem);
+  const GeoidGrid* geoid_grid = geoid ? &*geoid : nullptr;
+  // Whether the DEM spans the whole circle of longitude, as DemOnGlobe decides it for the
+  // whole raster: on its middle row.
+  const bool wraps_longitude = [&] {
+    const DemGrid middle = readDemWindow(mosaic, {0, height / 2, width, 1});
+    return DemOnGlobe(middle, geoid_grid).wrapsLongitude();
+  }();
+  ToDemCrs to_dem(frame);
   progress.endStage();
   // The widest quantisation step any zoom used (an output without one: the lattice tolerance
   // alone bounds where a vertex is put back on its pixel centre).
@@ -536,8 +699,8 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     if (report.problems.size() < kMaxProblems) report.problems.push_back(text);
   };
 
-  // ---- 2. every tile decoded and measured, finest zoom first (each against the finer
-  //      zoom's drawn surface) ----
+  // ---- 2. every tile decoded: its outline, region and rows; then measured strip by strip,
+  //      finest zoom first (each against the finer zoom's drawn surface) ----
   std::int32_t min_zoom = 1 << 30, max_zoom = -1;
   for (const CheckTile& tile : tiles) {
     if (tile.uri.empty()) continue;
@@ -547,50 +710,120 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   }
   if (report.tiles == 0) throw Error(ErrorCode::Input, output_dir + ": tileset.json has no content");
   report.zooms = static_cast<std::size_t>(max_zoom - min_zoom + 1);
-  progress.beginStage("decoding and measuring tiles", report.tiles);
-  // The footprint: the valid pixels the finest zoom covers. The coverage classes take in each
-  // zoom's tiles as soon as they are measured.
-  std::vector<std::uint8_t> footprint(dem.pixelCount(), 0);
-  PixelClasses classes(dem.pixelCount());
-  std::mutex classes_mutex;
+  // Per zoom, its tiles, the largest files first (a tile's work grows with its size).
+  std::vector<std::vector<std::size_t>> at_zoom(static_cast<std::size_t>(max_zoom + 1));
   {
-    std::vector<std::vector<std::size_t>> at_zoom(static_cast<std::size_t>(max_zoom + 1));
+    std::vector<std::uintmax_t> bytes(tiles.size(), 0);
     for (std::size_t i = 0; i < tiles.size(); ++i) {
-      if (!tiles[i].uri.empty()) at_zoom[static_cast<std::size_t>(tiles[i].key.zoom)].push_back(i);
+      if (tiles[i].uri.empty()) continue;
+      std::error_code error;
+      bytes[i] = fs::file_size(dir / tiles[i].uri, error);
+      at_zoom[static_cast<std::size_t>(tiles[i].key.zoom)].push_back(i);
     }
-    tbb::enumerable_thread_specific<DecodeScratch> scratch;
+    for (std::vector<std::size_t>& here : at_zoom) {
+      std::stable_sort(here.begin(), here.end(), [&](std::size_t i, std::size_t j) { return bytes[i] > bytes[j]; });
+    }
+  }
+  tbb::enumerable_thread_specific<DecodeScratch> scratch;
+  progress.beginStage("decoding tiles", report.tiles);
+  for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
+    const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
+    forEachLargestFirst(here, [&](std::size_t i) {
+      describeTile(dir, frame, wraps_longitude, geoid_grid, to_dem, tiles[i], scratch.local());
+    });
+    progress.advance(here.size());
+  }
+  progress.endStage();
+
+  // The strips, as writeZoomsInStrips makes them for the build: each strip of rows read with
+  // every row a triangle meeting it spans (the tallest triangle's rows above and below, and
+  // one more for the rows' spacings), placed on the globe, and every tile whose rows meet the
+  // window drawn over it. Memory: the window's heights, points on the globe and two zooms'
+  // surfaces (33 bytes per pixel for a WGS84 longitude and latitude DEM, 73 for another), and
+  // per pixel of the strip its coverage (5 bytes), whatever the raster's size.
+  std::int64_t tallest = 0;
+  for (const CheckTile& tile : tiles) tallest = std::max(tallest, tile.tallest_rows);
+  const std::int64_t reach = tallest + 2;
+  const std::int64_t strip_rows = std::max<std::int64_t>(16, options.strip_pixels / std::max(width, 1) - 2 * reach);
+  // The coverage classes of every strip, one after the other (class 0, the empty set, shared).
+  CoverageClasses classes;
+  std::size_t valid_pixels = 0;
+  std::optional<std::array<std::int32_t, 2>> first_left_out;
+  std::mutex classes_mutex;
+  progress.beginStage("measuring tiles strip by strip", static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
+  for (std::int64_t r0 = 0; r0 < height; r0 += strip_rows) {
+    const std::int64_t r1 = std::min<std::int64_t>(height, r0 + strip_rows);
+    const std::int64_t w0 = std::max<std::int64_t>(0, r0 - reach), w1 = std::min<std::int64_t>(height, r1 + reach);
+    const DemGrid window = readDemWindow(mosaic, {0, w0, width, static_cast<std::int32_t>(w1 - w0)});
+    const DemOnGlobe globe(window, geoid_grid);
+    const PixelBoxes boxes(globe);
+    const Strip strip{globe, boxes, height, w0, r0, r1, widest_step_m};
+    const std::size_t own_pixels = static_cast<std::size_t>(r1 - r0) * static_cast<std::size_t>(width);
+    // The footprint: the valid pixels the finest zoom covers. The coverage classes take in each
+    // zoom's tiles as soon as they are measured.
+    std::vector<std::uint8_t> footprint(own_pixels, 0);
+    PixelClasses strip_classes(own_pixels);
+    const auto inWindow = [&](const std::array<double, 2>& rows) {
+      return rows[1] >= static_cast<double>(w0) - 1 && rows[0] <= static_cast<double>(w1);
+    };
     // Two surfaces' memory, swapped from zoom to zoom.
-    ZoomSurface finer(dem.pixelCount()), surface(dem.pixelCount());
+    std::array<ZoomSurface, 2> surfaces{ZoomSurface(window.pixelCount()), ZoomSurface(window.pixelCount())};
     for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
-      const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
-      surface.clear();
-      // The largest files first (a tile's work grows with its size).
-      std::vector<std::size_t> order(here);
-      std::vector<std::uintmax_t> bytes(tiles.size(), 0);
-      for (const std::size_t i : here) {
-        std::error_code error;
-        bytes[i] = fs::file_size(dir / tiles[i].uri, error);
+      const auto k = static_cast<std::size_t>(max_zoom - zoom);
+      ZoomSurface& surface = surfaces[k % 2];
+      const ZoomSurface* finer = zoom < max_zoom ? &surfaces[(k + 1) % 2] : nullptr;
+      if (k > 0) surface.clear();
+      std::vector<std::size_t> here;
+      for (const std::size_t i : at_zoom[static_cast<std::size_t>(zoom)]) {
+        if (inWindow(tiles[i].rows)) here.push_back(i);
       }
-      std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) { return bytes[i] > bytes[j]; });
-      forEachLargestFirst(order, [&](std::size_t i) {
+      forEachLargestFirst(here, [&](std::size_t i) {
         CheckTile& tile = tiles[i];
-        decodeAndMeasure(dir, globe, boxes, geoid ? &*geoid : nullptr, to_dem, widest_step_m,
-                         zoom < max_zoom ? &finer : nullptr, surface, tile, scratch.local());
+        DecodeScratch& s = scratch.local();
+        measureInStrip(dir, frame, geoid_grid, to_dem, strip, finer, surface, tile, s);
         // Into the classes in the order tiles finish: the classes differ in their numbering
         // only, every count made from them is the same.
         const std::lock_guard<std::mutex> lock(classes_mutex);
         if (zoom == max_zoom) {
-          for (const std::uint32_t p : tile.pixels) footprint[p] = 1;
+          for (const std::uint32_t p : s.covered) footprint[p] = 1;
         }
-        classes.add(i, tile.pixels);
-        tile.pixels = std::vector<std::uint32_t>();  // (= {} would keep its memory)
+        strip_classes.add(i, s.covered);
       });
-      std::swap(finer, surface);
-      progress.advance(here.size());
     }
+    // ---- 1. coverage of the strip's rows by the finest zoom ----
+    for (std::int64_t row = r0; row < r1; ++row) {
+      const auto window_row = static_cast<std::int32_t>(row - w0);
+      for (std::int32_t col = 0; col < width; ++col) {
+        const std::size_t p = static_cast<std::size_t>(row - r0) * static_cast<std::size_t>(width) + static_cast<std::size_t>(col);
+        if (!window.isValid(col, window_row)) continue;
+        ++valid_pixels;
+        if (footprint[p]) {
+          ++report.footprint_pixels;
+          continue;
+        }
+        ++report.uncovered_valid_pixels;
+        bool touches_nodata = false;
+        for (int dr = -1; dr <= 1 && !touches_nodata; ++dr) {
+          for (int dc = -1; dc <= 1; ++dc) {
+            const std::int64_t r = row + dr;
+            const int c = col + dc;
+            if (r >= 0 && c >= 0 && r < height && c < width && !window.isValid(c, static_cast<std::int32_t>(r - w0))) {
+              touches_nodata = true;
+            }
+          }
+        }
+        if (!touches_nodata && report.left_out_pixels++ == 0) first_left_out = {{col, static_cast<std::int32_t>(row)}};
+      }
+    }
+    strip_classes.countFootprint(footprint);
+    classes.append(strip_classes);
+    progress.advance();
   }
-  classes.countFootprint(footprint);
   progress.endStage();
+  if (valid_pixels == 0) {
+    throw Error(ErrorCode::Input, mosaic.rasters.front().path +
+                                      ": every pixel is nodata; expected a DEM with at least some valid heights");
+  }
 
   for (const CheckTile& tile : tiles) {
     if (tile.uri.empty()) continue;
@@ -633,30 +866,12 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
       problem("tile " + keyText(tile.key) + ": region outside its parent's");
     }
   }
-
-  // ---- 1. coverage ----
-  for (std::int32_t row = 0; row < dem.height; ++row) {
-    for (std::int32_t col = 0; col < dem.width; ++col) {
-      const std::size_t p = dem.index(col, row);
-      if (footprint[p]) {
-        ++report.footprint_pixels;
-        continue;
-      }
-      if (!dem.isValid(col, row)) continue;
-      ++report.uncovered_valid_pixels;
-      bool touches_nodata = false;
-      for (int dr = -1; dr <= 1 && !touches_nodata; ++dr) {
-        for (int dc = -1; dc <= 1; ++dc) {
-          const int r = row + dr, c = col + dc;
-          if (r >= 0 && c >= 0 && r < dem.height && c < dem.width && !dem.isValid(c, r)) touches_nodata = true;
-        }
-      }
-      if (!touches_nodata && report.left_out_pixels++ == 0) {
-        problem("the finest zoom leaves out valid pixel (" + std::to_string(col) + ", " + std::to_string(row) +
-                "), which does not touch nodata");
-      }
-    }
+  if (first_left_out) {
+    problem("the finest zoom leaves out valid pixel (" + std::to_string((*first_left_out)[0]) + ", " +
+            std::to_string((*first_left_out)[1]) + "), which does not touch nodata");
   }
+
+  // ---- 1. coverage of cuts ----
   // The footprint pixels by the set of tiles whose content covers them, exactly (partition
   // refinement: a class is a set of tiles, made from its parent class by one tile more), so a
   // cut is counted per class instead of per pixel: a pixel is a hole of a cut when no tile of

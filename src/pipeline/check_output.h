@@ -33,8 +33,19 @@
 //      outline vertex two touching tiles (also neighbours at one zoom) both hold must decode
 //      to exactly the same position in both.
 // Violations are counted, with the first few described.
+//
+// Memory: the DEM is read and measured in strips of rows (CheckOptions::strip_pixels), as the
+// build measures its coarse zooms (writeZoomsInStrips): every tile is decoded once for its
+// outline, region and rows, then again in every strip whose window (the strip's rows and the
+// rows the tallest triangle reaches above and below) its rows meet, and measured there with
+// the window's DemOnGlobe; each pixel is counted in its own strip only, a tile's errors are
+// the largest over the strips, and its outline vertices are put back on their pixel centres
+// in the strip of their row. So a report is the same for any strip size, and memory is one
+// window and the tiles' outlines, whatever the raster's size. The time grows with the strips'
+// count (a tile is decoded in each strip it meets).
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -45,6 +56,11 @@ namespace terratiles {
 struct CheckOptions {
   std::size_t cuts = 1000;
   std::uint32_t seed = 1;
+  // The DEM is read and measured in strips of rows of about this many pixels (each with the
+  // rows the tallest triangle reaches above and below it); the report is the same for any
+  // strip size. Memory: 33 bytes per pixel of a strip for a DEM in WGS84 longitude and
+  // latitude, 73 for another CRS, plus each tile's outline. Positive; else Error(Usage).
+  std::int64_t strip_pixels = 16'000'000;
 };
 
 struct CheckReport {

@@ -283,6 +283,66 @@ TEST_SUITE("check") {
     CHECK(not_an_output.err.find("tileset.json cannot be read") != std::string::npos);
   }
 
+  TEST_CASE("the check gives the same report in strips of 16 rows as in one strip") {
+    // The DEM read and measured a strip of rows at a time (each with the rows its tiles'
+    // tallest triangle reaches): every pixel counted in its own strip, every tile's error the
+    // largest over the strips, the coverage classes summed over them. --strip-pixels 1 makes
+    // strips of 16 rows (the least), so each raster below has 15 to 76 strips.
+    test::TempDir dir;
+    // Interlaken with a hole of nodata and a ragged edge (ragged pixels left out next to it).
+    DemGrid dem = readDem({test::sharedData("ch_dhm25_interlaken_25m_2056.tif")});
+    for (std::int32_t row = 0; row < dem.height; ++row) {
+      for (std::int32_t col = 0; col < dem.width; ++col) {
+        const bool hole = std::hypot(col - 200.0, row - 100.0) < 30;
+        const bool ragged = col < 20 + (row * 7) % 13;
+        if (hole || ragged) dem.heights_m[dem.index(col, row)] = DemGrid::kNoData;
+      }
+    }
+    const std::string holed = dir / "interlaken_holed.tif";
+    test::writeGeoTiff(dem, holed);
+    struct Case {
+      std::string input;
+      std::vector<std::string> options;
+    };
+    const std::vector<Case> cases = {
+        {holed, {"--tile-triangles", "2048"}},
+        {test::sharedData("srtm3_N57E011_4326.tif"), {"--scheme", "geographic", "--tin-max-error", "5"}},
+    };
+    for (std::size_t c = 0; c < cases.size(); ++c) {
+      CAPTURE(cases[c].input);
+      const std::string out = dir / ("out" + std::to_string(c));
+      std::vector<std::string> args{"build", cases[c].input, "-o", out, "-q", "--no-report"};
+      args.insert(args.end(), cases[c].options.begin(), cases[c].options.end());
+      const auto built = test::runTerratiles(args);
+      CAPTURE(built.err);
+      REQUIRE(built.exit_code == 0);
+      Progress quiet(ProgressMode::Quiet);
+      CheckOptions one;
+      one.cuts = 300;
+      const CheckReport whole = checkOutput(out, one, quiet);
+      MESSAGE(describeCheck(whole));
+      CheckOptions many = one;
+      many.strip_pixels = 1;
+      test::checkSameReport(checkOutput(out, many, quiet), whole);
+      test::checkSeamless(whole);
+      if (c == 0) CHECK(whole.uncovered_valid_pixels > 0);  // the ragged edge, next to nodata
+    }
+    // A strip of no pixels is refused.
+    CheckOptions none;
+    none.strip_pixels = 0;
+    Progress quiet(ProgressMode::Quiet);
+    try {
+      checkOutput(dir / "out0", none, quiet);
+      FAIL("a strip of no pixels was accepted");
+    } catch (const Error& e) {
+      CHECK(e.code() == ErrorCode::Usage);
+      CHECK(std::string(e.what()).find("--strip-pixels is 0, expected a positive number") != std::string::npos);
+    }
+    const auto cli = test::runTerratiles({"check", dir / "out0", "--strip-pixels", "-5"});
+    CHECK(cli.exit_code == 2);
+    CHECK(cli.err.find("--strip-pixels is -5") != std::string::npos);
+  }
+
   TEST_CASE("the check fails on geometric errors measured before quantisation") {
     // The same raster twice: the levels and tiles are the same, only the position grid
     // differs (7.8 mm, the default, and 0.5 m). The fine build's errors are the coarse

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/gltf/read_glb.h"
 #include "src/base/progress.h"
 #include "src/pipeline/check_output.h"
 #include "tests/test_support.h"
@@ -137,5 +138,46 @@ TEST_SUITE("integration") {
     test::checkSeamless(report);
     CHECK(report.left_out_pixels == 0);
   }
-}
 
+  TEST_CASE("a global raster whose border vertices decode on the antimeridian near the pole passes the check") {
+    // 1.25' pixels from 88 to 90 deg N (about 15 s): the top row is at 89.9896 deg, where
+    // columns are 0.42 m apart, and 1 m position steps put border vertices of the first and
+    // last columns at longitude 180 exactly. The check put such a vertex at column -0.5, so the
+    // last column's tiles had outline edges and triangles across the whole grid in it: the
+    // top row's last pixels seemed left out (24), and vertices of other tiles seemed to lie on
+    // those edges (ETOPO5 at 8640 x 4320 px: 56 pixels and 60 vertices).
+    test::TempDir dir;
+    const std::string input = dir / "etopo5_pole.tif";
+    resampleEtopo5(17280, 96, input, 88, 90);
+    const test::CliResult built = test::runTerratiles({"build", input, "-o", dir / "out", "-q", "--no-report",
+                                                       "--tin-max-error", "10", "--position-step", "1"});
+    CAPTURE(built.err);
+    REQUIRE(built.exit_code == 0);
+    // The case this test is for: vertices near the pole decoded on the antimeridian.
+    std::size_t on_antimeridian = 0;
+    for (const auto& entry : fs::recursive_directory_iterator(dir / "out/tiles")) {
+      if (entry.path().extension() != ".glb") continue;
+      const GlbMesh mesh = readGlbFile(entry.path().string()).mesh;
+      for (std::size_t v = 0; v < mesh.vertexCount(); ++v) {
+        const double x = mesh.translation[0] + mesh.positions[3 * v];
+        const double y = -(mesh.translation[2] + mesh.positions[3 * v + 2]);
+        if (y == 0 && x < 0 && std::hypot(x, y) < 2e3) ++on_antimeridian;
+      }
+    }
+    MESSAGE(on_antimeridian << " decoded vertices on the antimeridian within 2 km of the pole");
+    REQUIRE(on_antimeridian > 0);
+    Progress quiet(ProgressMode::Quiet);
+    CheckOptions check;
+    check.cuts = 300;
+    const CheckReport report = checkOutput(dir / "out", check, quiet);
+    MESSAGE(describeCheck(report));
+    test::checkSeamless(report);
+    CHECK(report.left_out_pixels == 0);
+    CHECK(report.uncovered_valid_pixels == 0);
+    CHECK(report.missing_border_vertices == 0);
+    // The same in strips of 16 rows (6 strips, each with the rows its tallest triangle reaches).
+    CheckOptions strips = check;
+    strips.strip_pixels = 1;
+    test::checkSameReport(checkOutput(dir / "out", strips, quiet), report);
+  }
+}

@@ -1030,6 +1030,12 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   check_command->add_option("--cuts", check_options.cuts, "Random cuts of the tile tree to check")
       ->capture_default_str();
   check_command->add_option("--seed", check_options.seed, "Seed of the random cuts")->capture_default_str();
+  check_command
+      ->add_option("--strip-pixels", check_options.strip_pixels,
+                   "The DEM is read and measured in strips of rows of about this many pixels (33 bytes each for a "
+                   "DEM in longitude and latitude, 73 for another CRS, plus the rows the tallest triangle reaches); "
+                   "the result is the same for any strip size")
+      ->capture_default_str();
   addProgressOptions(*check_command, quiet, progress_choice);
 
   std::string serve_dir;
