@@ -351,6 +351,23 @@ struct DrawnTriangles {
   double shift_m = 0;
 };
 
+// DrawnTriangles in a block file (the handover's and the strips' spill file alike).
+void putDrawnTriangles(RecordWriter& out, const DrawnTriangles& t) {
+  out.putArray(t.positions);
+  out.putArray(t.grid);
+  out.putArray(t.triangle_indices);
+  out.put(t.shift_m);
+}
+
+DrawnTriangles getDrawnTriangles(RecordReader& in) {
+  DrawnTriangles t;
+  t.positions = in.getArray<EcefPoint>();
+  t.grid = in.getArray<GridCorner>();
+  t.triangle_indices = in.getArray<std::uint32_t>();
+  t.shift_m = in.get<double>();
+  return t;
+}
+
 // A tile's error over the strips it was measured in.
 struct DrawTileMeasureSum {
   double max_error_m = 0, finer_difference_m = 0;
@@ -510,10 +527,7 @@ class SpilledTiles {
 
   void add(const DrawnTriangles& t, std::array<std::int64_t, 2> rows) {
     RecordWriter out;
-    out.putArray(t.positions);
-    out.putArray(t.grid);
-    out.putArray(t.triangle_indices);
-    out.put(t.shift_m);
+    putDrawnTriangles(out, t);
     for (std::size_t done = 0; done < out.bytes.size();) {
       const ssize_t n = ::pwrite(fd_, out.bytes.data() + done, out.bytes.size() - done, static_cast<off_t>(end_ + done));
       if (n <= 0) fail("cannot write");
@@ -534,11 +548,7 @@ class SpilledTiles {
     }
     const std::string path = path_.string();
     RecordReader in{path, bytes};
-    DrawnTriangles t;
-    t.positions = in.getArray<EcefPoint>();
-    t.grid = in.getArray<GridCorner>();
-    t.triangle_indices = in.getArray<std::uint32_t>();
-    t.shift_m = in.get<double>();
+    DrawnTriangles t = getDrawnTriangles(in);
     in.expectEnd();
     return t;
   }
@@ -953,12 +963,7 @@ void writeHandoverFile(const BlockHandover& h, const std::string& path) {
     out.put(node.geometric_error_m);
   }
   out.put(static_cast<std::uint64_t>(h.written.coarsest.size()));
-  for (const DrawnTriangles& t : h.written.coarsest) {
-    out.putArray(t.positions);
-    out.putArray(t.grid);
-    out.putArray(t.triangle_indices);
-    out.put(t.shift_m);
-  }
+  for (const DrawnTriangles& t : h.written.coarsest) putDrawnTriangles(out, t);
   writeRecordFile(path, out.bytes);
 }
 
@@ -986,14 +991,7 @@ BlockHandover readHandoverFile(const std::string& path, bool implicit_tiling) {
     node.content_uri = contentUri(node.key, implicit_tiling);
     h.written.nodes.push_back(std::move(node));
   }
-  for (auto n = in.get<std::uint64_t>(); n > 0; --n) {
-    DrawnTriangles t;
-    t.positions = in.getArray<EcefPoint>();
-    t.grid = in.getArray<GridCorner>();
-    t.triangle_indices = in.getArray<std::uint32_t>();
-    t.shift_m = in.get<double>();
-    h.written.coarsest.push_back(std::move(t));
-  }
+  for (auto n = in.get<std::uint64_t>(); n > 0; --n) h.written.coarsest.push_back(getDrawnTriangles(in));
   in.expectEnd();
   if (h.level.triangle_indices.size() % 3 != 0 || h.inherited.size() != h.level.triangle_indices.size() / 3) in.damaged();
   for (const std::uint32_t v : h.level.triangle_indices) {
