@@ -1171,11 +1171,15 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   // The blocks write zooms Zb + 1 .. max; the rest from Zb up is built from their levels at Zb.
   const std::int32_t block_zoom = layout.zoom;
   if (plan.max_zoom <= block_zoom || block_zoom < plan.min_zoom) {
+    // Larger blocks are tiles of coarser zooms: double the side once per zoom too fine.
+    const std::int64_t suggested = block_zoom >= plan.max_zoom
+                                       ? std::int64_t{block_pixels} << (block_zoom - plan.max_zoom + 1)
+                                       : std::int64_t{block_pixels} >> (plan.min_zoom - block_zoom);
     throw Error(ErrorCode::Usage, "blocks of " + std::to_string(block_pixels) + " pixels are tiles of zoom " +
                                       std::to_string(block_zoom) + ", but the zooms are " +
                                       std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) +
                                       "; expected blocks of a zoom between them: pass a --block-pixels of about " +
-                                      std::to_string(block_pixels >> std::max(1, block_zoom - plan.max_zoom + 1)) +
+                                      std::to_string(suggested) +
                                       " (or larger than the mosaic's sides)");
   }
   shown.note("zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) + " (" +
@@ -1387,16 +1391,17 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
     };
     const bool coarser = z > plan.min_zoom;
     const auto make = [&](MergePiece piece, TileKey parent, Made& made) {
-      TileFrame frame(options.scheme, top_grid, &extent);
-      layout.follow(frame, factor);
-      frame.keepInside(coarser ? parent : piece.key);
+      TileFrame tile_frame(options.scheme, top_grid, &extent);
+      layout.follow(tile_frame, factor);
+      tile_frame.keepInside(coarser ? parent : piece.key);
       made.parent = parent;
       std::vector<Level>& levels = made.levels;
       const FacePartition inherited{std::move(piece.inherited), static_cast<std::int32_t>(piece.cluster_tiles.size())};
       if (coarser) {
-        const std::size_t tiles = frame.tilesIntersecting(schemeBounds(frame.toScheme(piece.level.vertices)), z).size();
+        const TileBounds piece_box = schemeBounds(tile_frame.toScheme(piece.level.vertices));
+        const std::size_t tiles = tile_frame.tilesIntersecting(piece_box, z).size();
         LevelOptions level_options =
-            buildLevelOptions(options, globe, frame, z, plan.max_zoom - z,
+            buildLevelOptions(options, globe, tile_frame, z, plan.max_zoom - z,
                               {options.clusters_per_tile * static_cast<std::int32_t>(std::max<std::size_t>(tiles, 1))});
         level_options.coarser_levels = 1;
         Progress quiet;
@@ -1413,7 +1418,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
         levels[1].inherited_partition = levels[0].partition;
       }
       made.cluster_tiles = std::move(piece.cluster_tiles);
-      made.zooms = assignZooms(options, frame, levels, 1, z, made.cluster_tiles, top_steps);
+      made.zooms = assignZooms(options, tile_frame, levels, 1, z, made.cluster_tiles, top_steps);
       made.zooms[0].vertex_step.assign(made.zooms[0].mesh->vertices.size(), top_step);
     };
     // The pieces of the next zoom: (y, x) of a parent and its children's indices.

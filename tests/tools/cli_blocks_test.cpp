@@ -197,4 +197,18 @@ TEST_SUITE("cli") {
     CHECK(test::filesUnder(output, {"tileset.json", "tiles/"}) == expected);
     CHECK_FALSE(fs::exists(blocks));
   }
+
+  TEST_CASE("blocks too small for the zooms are refused with the --block-pixels that fits") {
+    // Gabon at 5 m has zooms up to 12; blocks of 128 px are tiles of zoom 12, which leaves the
+    // blocks no finer zoom to write. Blocks of 256 px (zoom 11) are what the tests above build.
+    test::TempDir dir;
+    std::vector<std::string> args = gabonBuild(dir / "out");
+    args[7] = "128";  // --block-pixels
+    const auto refused = test::runTerratiles(args);
+    CAPTURE(refused.err);
+    CHECK(refused.exit_code == 2);
+    CHECK(refused.err.find("blocks of 128 pixels are tiles of zoom 12, but the zooms are") != std::string::npos);
+    CHECK(refused.err.find("pass a --block-pixels of about 256 ") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "out"));
+  }
 }

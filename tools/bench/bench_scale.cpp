@@ -4,7 +4,7 @@
 //
 //   terratiles_bench_scale [--source ETOPO5] [--dir DIR] [--sizes 8640x4320,17280x8640]
 //                          [--tin-max-error 10] [--threads N] [--no-check] [--terratiles PATH]
-//                          [--command build|tin] [--ranks N] [-- OPTION...]
+//                          [--command build|tin] [--ranks N] [--resume-at F] [-- OPTION...]
 //
 // The rasters are ETOPO5 (../shared/data/etopo5_global_4326.tif) resampled in-process with
 // GDALWarp, as `gdalwarp -r cubic -te -180 -90 180 90 -ts W H` (the -te keeps the pixels
@@ -18,12 +18,18 @@
 // --command tin times `terratiles tin RASTER -o DIR/out_WxH.ply` instead (pass --block-pixels
 // after --); --ranks N runs it under `mpirun --allow-run-as-root --oversubscribe -np N` (its
 // peak is the largest process's, as wait4 reports mpirun's reaped children).
+// --resume-at F (0 < F < 1; needs --block-pixels after --) then times an interrupted build per
+// raster: the same command into DIR/out_WxH_resumed, SIGKILLed after F times the first build's
+// seconds, run again with --resume (timed), and its output compared byte for byte with the
+// first build's (issue 16: killed half-way, the resumed run takes at most 60 %).
 #include <gdal_priv.h>
 #include <gdal_utils.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -60,12 +66,13 @@ struct BenchOptions {
   std::vector<std::string> build_options;
   std::string command = "build";  // or "tin"
   int ranks = 0;                   // > 0: under mpirun -np ranks
+  double resume_at = 0;            // > 0: also kill a build after this fraction of its time and resume it
 };
 
 constexpr const char* kUsage =
     "usage: terratiles_bench_scale [--source ETOPO5] [--dir DIR] [--sizes 8640x4320,17280x8640]\n"
     "                              [--tin-max-error 10] [--threads N] [--no-check] [--terratiles PATH]\n"
-    "                              [-- BUILD_OPTION...]\n"
+    "                              [--command build|tin] [--ranks N] [--resume-at F] [-- BUILD_OPTION...]\n"
     "  --source         the raster to resample (default ../shared/data/etopo5_global_4326.tif)\n"
     "  --dir            where the resampled rasters and the outputs go (default bench_scale/ beside\n"
     "                   this program); rasters already there are reused\n"
@@ -76,6 +83,8 @@ constexpr const char* kUsage =
     "  --terratiles     the terratiles executable (default: next to this program)\n"
     "  --command        build (default) or tin (no check; e.g. -- --block-pixels 2048)\n"
     "  --ranks          run it under mpirun -np N (with --threads 1: one thread per rank)\n"
+    "  --resume-at F    also kill a build after F (0 < F < 1) of the first build's time, run it\n"
+    "                   with --resume and compare its output (pass --block-pixels after --)\n"
     "  -- OPTION...     further options for the command\n";
 
 Size parseSize(const std::string& text) {
@@ -130,6 +139,11 @@ BenchOptions parseOptions(int argc, char** argv) {
     } else if (arg == "--ranks") {
       options.ranks = static_cast<int>(bench::parseNumber(value(), "--ranks"));
       if (options.ranks < 1) throw Error(ErrorCode::Usage, "--ranks expects at least 1");
+    } else if (arg == "--resume-at") {
+      options.resume_at = bench::parseNumber(value(), arg);
+      if (!(options.resume_at > 0 && options.resume_at < 1)) {
+        throw Error(ErrorCode::Usage, "--resume-at expects a fraction of the build's time between 0 and 1");
+      }
     } else if (arg == "--no-check") {
       options.check = false;
     } else if (arg == "--terratiles") {
@@ -137,6 +151,10 @@ BenchOptions parseOptions(int argc, char** argv) {
     } else {
       throw Error(ErrorCode::Usage, "unknown argument '" + arg + "' (see --help)");
     }
+  }
+  if (options.resume_at > 0 && options.ranks > 0) {
+    // SIGKILL reaches mpirun, not the ranks it started
+    throw Error(ErrorCode::Usage, "--resume-at cannot be combined with --ranks");
   }
   if (!fs::exists(options.source)) {
     throw Error(ErrorCode::Input, options.source + ": no such file; pass ETOPO5 with --source");
@@ -180,6 +198,7 @@ struct Measured {
   std::uint64_t peak_rss_bytes = 0;
   std::string peak_stage;
   std::string summary;  // the build's tiles and triangles, or the check's verdict
+  std::string resumed;  // a --resume build's account of the blocks it found done
 };
 
 // `check_exit`: an exit status the command may end with and still be measured (check's 5:
@@ -219,6 +238,10 @@ Measured measure(const std::vector<std::string>& args, int check_exit = -1) {
         stage_peak = peak;
         measured.peak_stage = event.value("stage", "");
       }
+    } else if (kind == "note") {
+      const std::string message = event.value("message", "");
+      const std::size_t at = message.find("resumed: ");
+      if (at != std::string::npos) measured.resumed = message.substr(at + 9);
     } else if (kind == "summary") {
       measured.summary = std::to_string(event.value("tiles", std::size_t{0})) + " tiles, " +
                          std::to_string(event.value("triangles", std::size_t{0})) + " triangles, check " +
@@ -226,6 +249,68 @@ Measured measure(const std::vector<std::string>& args, int check_exit = -1) {
     }
   }
   return measured;
+}
+
+// The regular files under `path` (or `path` itself), relative to it, sorted.
+std::vector<fs::path> filesUnder(const fs::path& path) {
+  if (fs::is_regular_file(path)) return {fs::path()};
+  std::vector<fs::path> files;
+  for (const auto& entry : fs::recursive_directory_iterator(path)) {
+    if (entry.is_regular_file()) files.push_back(fs::relative(entry.path(), path));
+  }
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+// "identical" when both hold the same files with the same bytes, else the first difference.
+std::string compareOutputs(const fs::path& expected, const fs::path& found) {
+  const std::vector<fs::path> expected_files = filesUnder(expected), found_files = filesUnder(found);
+  if (expected_files != found_files) {
+    return "DIFFERENT: " + std::to_string(found_files.size()) + " files against " +
+           std::to_string(expected_files.size());
+  }
+  std::vector<char> a(1 << 20), b(1 << 20);
+  for (const fs::path& file : expected_files) {
+    std::ifstream in_a(expected / file, std::ios::binary), in_b(found / file, std::ios::binary);
+    for (;;) {
+      in_a.read(a.data(), static_cast<std::streamsize>(a.size()));
+      in_b.read(b.data(), static_cast<std::streamsize>(b.size()));
+      if (in_a.gcount() != in_b.gcount() || !std::equal(a.begin(), a.begin() + in_a.gcount(), b.begin())) {
+        return "DIFFERENT: " + file.string();
+      }
+      if (in_a.gcount() == 0) break;
+    }
+  }
+  return "identical (" + std::to_string(expected_files.size()) + " files)";
+}
+
+// An interrupted build and its resumption (--resume-at).
+struct Resumed {
+  double killed_at_seconds = 0;
+  Measured resumed;
+  std::string comparison;   // compareOutputs against the uninterrupted build
+};
+
+Resumed interruptAndResume(std::vector<std::string> args, const fs::path& out, const fs::path& resumed_out,
+                           double full_seconds, double fraction) {
+  for (std::string& arg : args) {
+    if (arg == out.string()) arg = resumed_out.string();
+  }
+  Resumed result;
+  result.killed_at_seconds = fraction * full_seconds;
+  std::printf("interrupting %s after %.1f s ...\n", resumed_out.filename().c_str(), result.killed_at_seconds);
+  std::fflush(stdout);
+  const bench::ChildRun killed = bench::runChild(args, true, "", result.killed_at_seconds);
+  if (!killed.killed) {
+    throw Error(ErrorCode::Internal, "the run to interrupt " + killed.describe() + " before " +
+                                         std::to_string(result.killed_at_seconds) + " s; pass a smaller --resume-at");
+  }
+  std::printf("resuming %s ...\n", resumed_out.filename().c_str());
+  std::fflush(stdout);
+  args.push_back("--resume");
+  result.resumed = measure(args);
+  result.comparison = compareOutputs(out, resumed_out);
+  return result;
 }
 
 int runBench(int argc, char** argv) {
@@ -237,6 +322,7 @@ int runBench(int argc, char** argv) {
   struct Row {
     Size size;
     Measured build, check;
+    Resumed resumed;
   };
   std::vector<Row> rows;
   for (std::size_t i = 0; i < rasters.size(); ++i) {
@@ -256,11 +342,16 @@ int runBench(int argc, char** argv) {
     args.insert(args.end(), options.build_options.begin(), options.build_options.end());
     std::printf("%s %s ...\n", tin ? "triangulating" : "building", rasters[i].filename().c_str());
     std::fflush(stdout);
-    Row row{options.sizes[i], measure(args), {}};
+    Row row{options.sizes[i], measure(args), {}, {}};
     if (options.check && !tin) {
       std::printf("checking %s ...\n", out.filename().c_str());
       std::fflush(stdout);
       row.check = measure({options.terratiles, "check", out.string(), "--progress", "json"}, 5);
+    }
+    if (options.resume_at > 0) {
+      fs::path resumed_out = out;
+      resumed_out.replace_filename(out.stem().string() + "_resumed" + out.extension().string());
+      row.resumed = interruptAndResume(args, out, resumed_out, row.build.seconds, options.resume_at);
     }
     rows.push_back(row);
   }
@@ -279,6 +370,17 @@ int runBench(int argc, char** argv) {
     std::printf("  %s: %s\n", row.size.text().c_str(), row.build.summary.c_str());
     if (options.check && options.command == "build") {
       std::printf("  %s check: %s\n", row.size.text().c_str(), row.check.summary.c_str());
+    }
+  }
+  if (options.resume_at > 0) {
+    std::printf("\nkilled after %.0f %% of the build's time, then run with --resume:\n", options.resume_at * 100);
+    std::printf("%-12s %9s %10s %10s %11s  %s\n", "raster", "build s", "killed at", "resumed s", "resumed/all",
+                "output against the build's");
+    for (const Row& row : rows) {
+      std::printf("%-12s %9.1f %10.1f %10.1f %10.0f%%  %s\n", row.size.text().c_str(), row.build.seconds,
+                  row.resumed.killed_at_seconds, row.resumed.resumed.seconds,
+                  100 * row.resumed.resumed.seconds / row.build.seconds, row.resumed.comparison.c_str());
+      std::printf("  %s resumed: %s\n", row.size.text().c_str(), row.resumed.resumed.resumed.c_str());
     }
   }
   if (rows.size() >= 2) {

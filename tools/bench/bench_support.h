@@ -5,6 +5,8 @@
 // (tools/bench/delatin/run_delatin.mjs) on a raw height grid.
 
 #include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
 #include <spawn.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -144,6 +146,7 @@ struct ChildRun {
   std::uint64_t peak_rss_bytes = 0;     // wait4's ru_maxrss: the child's peak resident set
   std::uint64_t floor_rss_bytes = 0;    // our resident set when spawning: see runChild
   std::string output;                   // its stdout and stderr, when captured
+  bool killed = false;                  // we sent it SIGKILL (runChild's kill_after_seconds)
 
   bool succeeded() const { return WIFEXITED(status) && WEXITSTATUS(status) == 0; }
   // "exited with status 3" or "killed by signal 9".
@@ -164,14 +167,19 @@ inline std::uint64_t currentResidentBytes() {
 // Runs args (args[0] searched in PATH unless it holds a '/') with our stdin; with
 // capture_output its stdout and stderr go to ChildRun::output, otherwise to ours. Returns once
 // it has ended, whatever its status. Throws Error(Usage) with `start_hint` appended when it
-// cannot be started.
+// cannot be started. kill_after_seconds > 0 (with capture_output): SIGKILL it once that much
+// wall clock has passed (how a benchmark interrupts a run half-way; see ChildRun::killed).
 //
 // Peak memory: posix_spawn's child starts on our address space (vfork), and Linux carries that
 // address space's high-water mark into the child's ru_maxrss at exec. So we first reset our
 // own mark to our current resident set (writing 5 to /proc/self/clear_refs, Linux >= 4.0):
 // the child's figure is then max(its own peak, floor_rss_bytes), and callers should hold
 // little memory when they spawn.
-inline ChildRun runChild(const std::vector<std::string>& args, bool capture_output, const std::string& start_hint) {
+inline ChildRun runChild(const std::vector<std::string>& args, bool capture_output, const std::string& start_hint,
+                         double kill_after_seconds = 0) {
+  if (kill_after_seconds > 0 && !capture_output) {
+    throw Error(ErrorCode::Internal, "runChild: kill_after_seconds needs capture_output");
+  }
   std::vector<char*> argv;
   for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
   argv.push_back(nullptr);
@@ -204,6 +212,18 @@ inline ChildRun runChild(const std::vector<std::string>& args, bool capture_outp
   if (capture_output) {
     char buffer[1 << 16];
     for (;;) {
+      if (kill_after_seconds > 0 && !run.killed) {
+        const double left =
+            kill_after_seconds - std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        pollfd readable{pipe_fds[0], POLLIN, 0};
+        const int ready = left > 0 ? poll(&readable, 1, static_cast<int>(std::ceil(left * 1000))) : 0;
+        if (ready == 0) {  // time is up: the child has not closed its output, so it is not reaped yet
+          kill(pid, SIGKILL);
+          run.killed = true;
+          continue;
+        }
+        if (ready < 0 && errno == EINTR) continue;
+      }
       const ssize_t n = read(pipe_fds[0], buffer, sizeof buffer);
       if (n > 0) {
         run.output.append(buffer, static_cast<std::size_t>(n));
