@@ -6,6 +6,12 @@
 namespace terratiles {
 
 std::optional<double> GeoidGrid::undulationAt(double lon_deg, double lat_deg) const {
+  // A latitude past a pole names the point on the other side of it (geodeticToEcef puts it
+  // there): the centre of a DEM overview's last row, whose pixels run half a pixel past a pole.
+  if (std::abs(lat_deg) > 90.0 && std::abs(lat_deg) <= 180.0) {
+    lat_deg = std::copysign(180.0, lat_deg) - lat_deg;
+    lon_deg += lon_deg < 0 ? 180.0 : -180.0;
+  }
   double x = (lon_deg - first_lon_deg) / step_deg;
   const double y = (first_lat_deg - lat_deg) / step_lat_deg;
   if (wraps_longitude) {

@@ -23,7 +23,7 @@ struct GeoidGrid {
   std::vector<float> undulation_m;  // row-major, NaN where the grid has no value
 
   // N at (lon, lat) by bilinear interpolation; nullopt outside the grid or next to a
-  // node without value.
+  // node without value. A latitude past a pole (|lat| in (90, 180]) is the point across it.
   std::optional<double> undulationAt(double lon_deg, double lat_deg) const;
 };
 

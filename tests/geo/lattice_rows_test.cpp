@@ -106,10 +106,10 @@ void checkStrips(const DemGrid& dem, const GeoidGrid* geoid, std::int32_t strip_
         ++r;
         continue;
       }
-      const auto row = static_cast<std::int32_t>(pixel / static_cast<std::size_t>(dem.width));
-      REQUIRE(whole.poleRow(row));
+      const auto pixel_row = static_cast<std::int32_t>(pixel / static_cast<std::size_t>(dem.width));
+      REQUIRE(whole.poleRow(pixel_row));
       const auto same_row = std::find_if(reference.begin(), reference.end(), [&](const auto& p) {
-        return p.first / static_cast<std::size_t>(dem.width) == static_cast<std::size_t>(row);
+        return p.first / static_cast<std::size_t>(dem.width) == static_cast<std::size_t>(pixel_row);
       });
       REQUIRE(same_row != reference.end());
       CHECK(offset_m == doctest::Approx(same_row->second).epsilon(1e-9));

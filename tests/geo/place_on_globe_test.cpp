@@ -76,4 +76,24 @@ TEST_SUITE("geo") {
     CHECK(delft < 1e-3);
     CHECK(srtm < 1e-3);
   }
+
+  TEST_CASE("a latitude past a pole takes the geoid's undulation at the point across it") {
+    // A DEM overview's last row over a pole has its centres half an overview pixel past it.
+    const GeoidGrid egm96 = readGeoidGrid(kDefaultGeoidPath);
+    for (const double lon : {-179.958333, -30.0, 0.0, 45.5, 179.9}) {
+      for (const double past : {0.041667, 0.125, 1.0}) {
+        const std::optional<double> south = egm96.undulationAt(lon, -90.0 - past);
+        const std::optional<double> north = egm96.undulationAt(lon, 90.0 + past);
+        const double across = lon < 0 ? lon + 180.0 : lon - 180.0;
+        REQUIRE(south.has_value());
+        REQUIRE(north.has_value());
+        CHECK(*south == *egm96.undulationAt(across, -90.0 + past));
+        CHECK(*north == *egm96.undulationAt(across, 90.0 - past));
+      }
+      // At the poles themselves every longitude gives one value (EGM96: -29.5 m and 13.6 m).
+      CHECK(*egm96.undulationAt(lon, -90.0) == doctest::Approx(-29.53).epsilon(1e-3));
+      CHECK(*egm96.undulationAt(lon, 90.0) == doctest::Approx(13.61).epsilon(1e-3));
+    }
+    CHECK_FALSE(egm96.undulationAt(0.0, 180.5).has_value());  // not a latitude at all
+  }
 }

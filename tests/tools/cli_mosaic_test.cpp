@@ -21,8 +21,24 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// gdal_translate -srcwin, in-process: cuts `source` into a columns x rows grid of GeoTIFFs in
-// `dir` (the last column and row take the remainder). Returns their paths, row by row.
+// gdal_translate -srcwin x y w h, in-process: the window of `dataset` as the GeoTIFF `path`.
+void cutWindow(GDALDatasetH dataset, int x, int y, int w, int h, const std::string& path) {
+  const std::vector<std::string> words{"-q", "-srcwin", std::to_string(x), std::to_string(y), std::to_string(w),
+                                       std::to_string(h)};
+  std::vector<char*> argv;
+  for (const std::string& word : words) argv.push_back(const_cast<char*>(word.c_str()));
+  argv.push_back(nullptr);
+  GDALTranslateOptions* options = GDALTranslateOptionsNew(argv.data(), nullptr);
+  int failed = 0;
+  GDALDatasetH piece = GDALTranslate(path.c_str(), dataset, options, &failed);
+  GDALTranslateOptionsFree(options);
+  REQUIRE(piece != nullptr);
+  REQUIRE(failed == 0);
+  GDALClose(piece);
+}
+
+// Cuts `source` into a columns x rows grid of GeoTIFFs in `dir` (the last column and row take
+// the remainder). Returns their paths, row by row.
 std::vector<std::string> cutIntoPieces(const std::string& source, int columns, int rows, const fs::path& dir) {
   GDALAllRegister();
   GDALDatasetH dataset = GDALOpen(source.c_str(), GA_ReadOnly);
@@ -35,19 +51,8 @@ std::vector<std::string> cutIntoPieces(const std::string& source, int columns, i
       const int x = column * piece_width, y = row * piece_height;
       const int w = column + 1 == columns ? width - x : piece_width;
       const int h = row + 1 == rows ? height - y : piece_height;
-      const std::vector<std::string> words{"-q", "-srcwin", std::to_string(x), std::to_string(y), std::to_string(w),
-                                           std::to_string(h)};
-      std::vector<char*> argv;
-      for (const std::string& word : words) argv.push_back(const_cast<char*>(word.c_str()));
-      argv.push_back(nullptr);
-      GDALTranslateOptions* options = GDALTranslateOptionsNew(argv.data(), nullptr);
       const std::string path = (dir / ("piece_" + std::to_string(row) + "_" + std::to_string(column) + ".tif")).string();
-      int failed = 0;
-      GDALDatasetH piece = GDALTranslate(path.c_str(), dataset, options, &failed);
-      GDALTranslateOptionsFree(options);
-      REQUIRE(piece != nullptr);
-      REQUIRE(failed == 0);
-      GDALClose(piece);
+      cutWindow(dataset, x, y, w, h, path);
       pieces.push_back(path);
     }
   }
@@ -175,6 +180,31 @@ TEST_SUITE("cli") {
     options.cuts = 300;
     test::checkSeamless(checkOutput(dir / "files", options, quiet));
     test::checkSeamless(checkOutput(dir / "overview", options, quiet));
+  }
+
+  TEST_CASE("a polar cut of ETOPO5 builds in blocks over an overview whose last row runs past the pole") {
+    // ETOPO5's rows are centred on whole multiples of 5' down to -90 exactly. 121 of them
+    // (-80 to -90), 174,240 px against --overview-pixels 20000, make an overview of 1 pixel of
+    // 4 x 4 (360 x 31): rows of 4 mosaic rows and a last one of the pole row alone,
+    // centred 1.5 mosaic rows past the pole: its geoid undulation is the one across the pole
+    // (this build stopped with "outside the geoid grid" before).
+    test::TempDir dir;
+    GDALAllRegister();
+    GDALDatasetH etopo5 = GDALOpen(test::sharedData("etopo5_global_4326.tif").c_str(), GA_ReadOnly);
+    REQUIRE(etopo5 != nullptr);
+    REQUIRE(GDALGetRasterYSize(etopo5) == 2161);
+    const std::string polar = dir / "etopo5_south_pole.tif";
+    cutWindow(etopo5, 0, 2040, 1440, 121, polar);
+    GDALClose(etopo5);
+    const auto result = test::runTerratiles({"build", polar, "-o", dir / "out", "--scheme", "geographic",
+                                             "--tin-max-error", "5", "--block-pixels", "256", "--overview-pixels",
+                                             "20000", "--no-report"});
+    INFO(result.err);
+    REQUIRE(result.exit_code == 0);
+    Progress quiet;
+    CheckOptions options;
+    options.cuts = 300;
+    test::checkSeamless(checkOutput(dir / "out", options, quiet));
   }
 
   TEST_CASE("inputs that are no mosaic are refused before anything is written") {
