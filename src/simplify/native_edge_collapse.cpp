@@ -462,18 +462,20 @@ class ClusterCollapser {
   }
 
   // The collapses of u into its neighbour v, passed to add: u -> v (v stays where it is),
-  // and with v free too, v moved to the edge's quadric optimum and to the best point of the
-  // segment uv (when they exist). The segment's point costs at least the optimum (the
-  // quadric's least value), so `all` false leaves it out when the optimum exists: the
-  // cheapest of them (the queue's key) needs it only when the optimum does not.
+  // and with v free too, v moved to the edge's quadric optimum or, only where that does not
+  // exist, to the best point of the segment uv (CGAL's placement and its fallback). The
+  // segment's point costs at least the optimum (the quadric's least value); trying it too when
+  // the filter refuses the optimum made ETOPO5's levels 30 % slower for 0-1 % fewer triangles.
   template <typename Add>
-  void collapsesInto(std::uint32_t u, std::uint32_t v, bool all, Add&& add) {
+  void collapsesInto(std::uint32_t u, std::uint32_t v, Add&& add) {
     const Quadric q = combined(u, v);
     add(stays(q, v));
     if (a_.locked[v]) return;
     const Collapse moved = cachedOptimum(&q, u, v);
-    if (moved.moves) add(moved);
-    if (moved.moves && !all) return;
+    if (moved.moves) {
+      add(moved);
+      return;
+    }
     const Collapse on_edge = segmentOptimum(q, u, v);
     if (on_edge.moves) add(on_edge);
   }
@@ -487,7 +489,7 @@ class ClusterCollapser {
     Collapse cheapest;
     cheapest.cost = std::numeric_limits<double>::infinity();
     for (const std::uint32_t v : a_.u_ring) {
-      collapsesInto(u, v, false, [&](const Collapse& c) {
+      collapsesInto(u, v, [&](const Collapse& c) {
         if (c < cheapest) cheapest = c;
       });
     }
@@ -507,7 +509,7 @@ class ClusterCollapser {
       return;
     }
     Collapse cheapest = a_.best[w];
-    collapsesInto(w, v, false, [&](const Collapse& c) {
+    collapsesInto(w, v, [&](const Collapse& c) {
       if (c < cheapest) cheapest = c;
     });
     queueAt(w, cheapest);
@@ -599,7 +601,7 @@ class ClusterCollapser {
       if (accepts(u, first, out)) return true;
       a_.targets.clear();
       for (const std::uint32_t v : a_.u_ring) {
-        collapsesInto(u, v, true, [&](const Collapse& c) {
+        collapsesInto(u, v, [&](const Collapse& c) {
           if (first < c || c < first) a_.targets.push_back(c);
         });
       }
@@ -761,7 +763,7 @@ class ClusterCollapser {
     return allNewTriangles(u, v, moves, [&](std::uint32_t p, std::uint32_t q, std::uint32_t r) {
       return isUpwardTriangle(at(p), at(q), at(r)) &&
              !isSteeperThan(at(p), at(q), at(r), options_.metres_per_col, options_.metres_per_row, kMaxSlope) &&
-             !isSteepSliver(at(p), at(q), at(r), options_.metres_per_col, options_.metres_per_row);
+             !isSliver(at(p), at(q), at(r));
     });
   }
 

@@ -13,8 +13,9 @@
 // clusters or a constraint), so a free vertex's star is closed and inside its cluster. A
 // collapse removes a free vertex u into a neighbour v: when v is locked, u goes to v (a
 // half-edge collapse, v stays where it is); when v is free too, either that, or v moves to the
-// edge's quadric optimum (the 3x3 solve of CGAL's placement below, when well conditioned), or
-// to the best point of the segment uv. The two triangles of edge uv vanish. Costs:
+// edge's quadric optimum (the 3x3 solve of CGAL's placement below, when well conditioned), or,
+// only where that does not exist, to the best point of the segment uv. The two triangles of
+// edge uv vanish. Costs:
 // Garland-Heckbert plane quadrics in metres (unit face normals, as CGAL's), (Q_u + Q_v) at the
 // new position. Greedy over all collapses like CGAL's queue of edges: a binary heap holds every
 // free vertex at its cheapest collapse not yet refused (ties by vertex order); the vertex on
@@ -47,7 +48,9 @@
 //       a height field without fold-overs, and covers exactly the same ground; or steeper
 //       than 100 (rise over run in metres, about 89.4 degrees): a sliver wall next to a much
 //       higher vertex, which turns a quantisation step into a height jump as large as the
-//       wall (measured: 490 m on ETOPO5 with the 16 m step of a quarter-world tile), or
+//       wall (measured: 490 m on ETOPO5 with the 16 m step of a quarter-world tile); the
+//       native engine also refuses slivers (least altitude under 0.05 pixels), which a
+//       quantisation step folds over the same way, or
 //   (b) one of the triangles it creates is more than options.max_error_m away from a valid
 //       DEM pixel it covers (pixel centres at whole (col, row), the inclusion rule and the
 //       measure of measureTin: on the globe (options.globe), the triangle as drawn, straight
