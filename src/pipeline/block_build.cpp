@@ -448,7 +448,7 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
       DrawnContent content = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
       Encoded& e = encoded[i];
       e.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
-                                   &surface, nullptr, &boxes);
+                                   &surface, {}, &boxes);
       e.region = drawnRegion(content.positions, content.triangle_indices);
       e.glb = encodeContent(content, glb, &e.position_bits);
       if (keep) {

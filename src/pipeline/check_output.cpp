@@ -216,10 +216,14 @@ struct DecodeScratch {
   std::vector<std::uint32_t> outline_index;     // per vertex: its outline number, or kNotOnOutline
   std::vector<std::uint32_t> outline_vertices;  // per outline vertex: its mesh index
   // In a strip: grid positions in the window's rows, with the outline back on pixel centres;
-  // the pixels covered and met.
+  // the pixels of the strip's own rows covered or met, each once (from the strip's first
+  // row), and a bit per pixel of those rows: set while it is in `covered` (all clear between
+  // tiles); a triangle's pixels inside it in the grid.
   std::vector<GridCorner> window_grid;
   std::vector<GridPoint> lattice;
   std::vector<std::uint32_t> covered;
+  std::vector<std::uint64_t> in_covered;
+  std::vector<std::uint32_t> triangle_pixels;
 };
 
 // Decodes a tile into `s` (see DecodeScratch): every vertex back from ECEF to the DEM's grid
@@ -358,7 +362,7 @@ struct Strip {
 // surface (adding its own to `surface`), each pixel counted in its own strip only. The outline
 // vertices whose pixel row is the strip's are recorded in the tile (tile.vertex_grid,
 // off_lattice). Leaves the covered pixels of the strip's own rows in s.covered (indices from
-// the strip's first row, with repeats). Needs the finer zoom's surface of the window complete.
+// the strip's first row, each once). Needs the finer zoom's surface of the window complete.
 void measureInStrip(const fs::path& dir, const DemGrid& frame, const GeoidGrid* geoid, ToDemCrs& to_dem,
                     const Strip& strip, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile,
                     DecodeScratch& s) {
@@ -412,11 +416,27 @@ void measureInStrip(const fs::path& dir, const DemGrid& frame, const GeoidGrid* 
 
   // Coverage: the pixels inside its triangles in the grid and the pixels whose verticals
   // meet its triangles as drawn (a triangle with a pole vertex has no place in the grid; a
-  // long chord strays from its grid triangle by its bulge, far from a pole too).
+  // long chord strays from its grid triangle by its bulge, far from a pole too). Only the
+  // strip's own rows count, each pixel once: a finest zoom's pixel is met by several small
+  // triangles, and a list with the repeats held 3-4 entries per pixel.
+  const std::size_t first = static_cast<std::size_t>(strip.first_row - strip.window_row) * static_cast<std::size_t>(dem.width);
+  const std::size_t end = static_cast<std::size_t>(strip.end_row - strip.window_row) * static_cast<std::size_t>(dem.width);
   std::vector<std::uint32_t>& covered = s.covered;
   covered.clear();
+  if (s.in_covered.size() < (end - first + 63) / 64) s.in_covered.resize((end - first + 63) / 64, 0);
+  const auto cover = [&](std::size_t pixel) {
+    if (pixel < first || pixel >= end) return;
+    const std::size_t own = pixel - first;
+    std::uint64_t& word = s.in_covered[own / 64];
+    const std::uint64_t bit = std::uint64_t{1} << (own % 64);
+    if (word & bit) return;
+    word |= bit;
+    covered.push_back(static_cast<std::uint32_t>(own));
+  };
   const auto rasterise = [&](const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-    coveredValidPixels(dem, a, b, c, covered);
+    s.triangle_pixels.clear();
+    coveredValidPixels(dem, a, b, c, s.triangle_pixels);
+    for (const std::uint32_t pixel : s.triangle_pixels) cover(pixel);
   };
   const auto& idx = s.indices;
   for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
@@ -440,28 +460,22 @@ void measureInStrip(const fs::path& dir, const DemGrid& frame, const GeoidGrid* 
     rasterise({v1.col, pole_row, 0}, v2, v1);
   }
   // Errors as drawn, from the decoded corners (1 mm: PROJ's round trip of them); the pixels
-  // met join its coverage.
-  const std::size_t grid_covered = covered.size();
+  // met join its coverage, and those of the strip's own rows count as its hits.
   const DrawnTileMeasure measure =
-      measureDrawnTile(globe, s.ecef, s.window_grid, idx, 1e-3, finer, &surface, &covered, &strip.boxes);
+      measureDrawnTile(globe, s.ecef, s.window_grid, idx, 1e-3, finer, &surface,
+                       [&](std::size_t pixel) {
+                         if (pixel < first || pixel >= end) return;
+                         ++tile.measure.hits;
+                         if (finer && finer->drawn(pixel)) ++tile.measure.finer_hits;
+                         cover(pixel);
+                       },
+                       &strip.boxes);
   // The largest errors over the window are the tile's over the strip's rows or below them
   // (the window's other rows see part of the finer zoom's surface, whose difference is no
   // larger than all of it); its pixels are counted in their own strip.
   tile.measure.max_error_m = std::max(tile.measure.max_error_m, measure.max_error_m);
   tile.measure.finer_difference_m = std::max(tile.measure.finer_difference_m, measure.finer_difference_m);
-  const std::size_t first = static_cast<std::size_t>(strip.first_row - strip.window_row) * static_cast<std::size_t>(dem.width);
-  const std::size_t end = static_cast<std::size_t>(strip.end_row - strip.window_row) * static_cast<std::size_t>(dem.width);
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < covered.size(); ++i) {
-    const std::uint32_t p = covered[i];
-    if (p < first || p >= end) continue;
-    if (i >= grid_covered) {
-      ++tile.measure.hits;
-      if (finer && finer->drawn(p)) ++tile.measure.finer_hits;
-    }
-    covered[kept++] = static_cast<std::uint32_t>(p - first);
-  }
-  covered.resize(kept);
+  for (const std::uint32_t own : covered) s.in_covered[own / 64] &= ~(std::uint64_t{1} << (own % 64));
 }
 
 // Vertex correspondence (paper 5.2.3) between the contents of two tiles one zoom apart that

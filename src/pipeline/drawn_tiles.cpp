@@ -322,7 +322,7 @@ namespace {
 template <typename BoxOf>
 DrawnTileMeasure measureTriangles(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
-                                  const ZoomSurface* finer, ZoomSurface* surface, std::vector<std::uint32_t>* met,
+                                  const ZoomSurface* finer, ZoomSurface* surface, const MetPixel& met,
                                   BoxOf&& boxOf) {
   DrawnTileMeasure measure;
   const DemGrid& dem = globe.dem();
@@ -345,7 +345,7 @@ DrawnTileMeasure measureTriangles(const DemOnGlobe& globe, std::span<const EcefP
         measure.finer_difference_m = std::max(measure.finer_difference_m, finer->differenceTo(pixel, offset_m));
       }
       if (surface) surface->include(pixel, offset_m);
-      if (met) met->push_back(static_cast<std::uint32_t>(pixel));
+      if (met) met(pixel);
     }
   }
   return measure;
@@ -356,7 +356,7 @@ DrawnTileMeasure measureTriangles(const DemOnGlobe& globe, std::span<const EcefP
 DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
                                   double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
-                                  std::vector<std::uint32_t>* met, const PixelBoxes* boxes) {
+                                  const MetPixel& met, const PixelBoxes* boxes) {
   return measureTriangles(globe, vertices, grid, indices, finer, surface, met,
                           [&](const std::array<GridCorner, 3>& corners, const DrawnTriangle& triangle) {
                             return boxes ? boxes->box(corners, triangle.longestEdge(), shift_m)
@@ -369,7 +369,7 @@ DrawnTileMeasure measureDrawnTileInStrip(const DemOnGlobe& strip, std::int64_t f
                                          std::span<const std::uint32_t> indices, double shift_m,
                                          const ZoomSurface* finer, ZoomSurface* surface) {
   const std::int64_t strip_rows = strip.dem().height;
-  return measureTriangles(strip, vertices, grid, indices, finer, surface, nullptr,
+  return measureTriangles(strip, vertices, grid, indices, finer, surface, {},
                           [&](const std::array<GridCorner, 3>& corners, const DrawnTriangle& triangle) {
                             PixelBox box = rows.box(corners, triangle.longestEdge(), shift_m);
                             const std::int64_t row0 = std::max<std::int64_t>(box.row0 - first_row, 0);

@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <span>
 #include <vector>
@@ -138,13 +139,15 @@ struct DrawnTileMeasure {
 
 // Measures a tile's triangles (`indices`, 3 per triangle, into `vertices`: ECEF as decoded,
 // and `grid`: their positions in the DEM's grid, at most `shift_m` from the drawn ones). Adds
-// every offset to `surface` (when not null) and compares with `finer` (when not null); the
-// pixels met go to `met` (when not null; unsorted, with repeats). `boxes` (when not null, made
-// from `globe`) finds the candidate pixels faster, with the same result.
+// every offset to `surface` (when not null) and compares with `finer` (when not null); each
+// valid pixel a triangle meets goes to `met` (when not empty; a pixel met by several
+// triangles once for each). `boxes` (when not null, made from `globe`) finds the candidate
+// pixels faster, with the same result.
+using MetPixel = std::function<void(std::size_t pixel)>;
 DrawnTileMeasure measureDrawnTile(const DemOnGlobe& globe, std::span<const EcefPoint> vertices,
                                   std::span<const GridCorner> grid, std::span<const std::uint32_t> indices,
                                   double shift_m, const ZoomSurface* finer, ZoomSurface* surface,
-                                  std::vector<std::uint32_t>* met = nullptr, const PixelBoxes* boxes = nullptr);
+                                  const MetPixel& met = {}, const PixelBoxes* boxes = nullptr);
 
 // The same on a strip of a mosaic's rows: `strip` is the globe of the mosaic's rows
 // first_row ... (its whole width), `grid` in the mosaic's pixels, `finer` and `surface` the

@@ -470,7 +470,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
             drawnContent(level.tiles[i], *level.mesh, vertices.snapped, vertices.normals, globe, content_scratch.local());
         EncodedTile& out = tiles[i];
         out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
-                                       &surface, nullptr, &boxes);
+                                       &surface, {}, &boxes);
         out.region = drawnRegion(content.positions, content.triangle_indices);
         out.vertices = content.positions.size();
         out.glb = encodeContent(content, zoom_glb[k], &out.position_bits);
