@@ -421,6 +421,7 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
     std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
     if (normals_fix) normals_fix(mesh, normals);
     const double largest_step = snapToVertexSteps(zoom, snapped);
+    const PlaceVertices snapped_of = placedFrom(snapped);
     const double shift_m = 0.87 * largest_step;
     ZoomSurface& surface = surfaces[k % 2];
     if (surface.empty()) {
@@ -445,7 +446,7 @@ WrittenZooms writeZooms(std::vector<ZoomToWrite>& zooms, const DemOnGlobe& globe
     });
     const bool keep = keep_coarsest && k + 1 == zooms.size();
     forEachLargestFirst(order, [&](std::size_t i) {
-      DrawnContent content = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch.local());
+      DrawnContent content = drawnContent(zoom.tiles[i], mesh, snapped_of, normals, globe, content_scratch.local());
       Encoded& e = encoded[i];
       e.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
                                    &surface, {}, &boxes);
@@ -605,6 +606,7 @@ class CoarseZooms {
     globe.place(mesh.vertices, {}, snapped);
     const std::vector<FloatNormal> normals = levelNormals(mesh, snapped);
     const double shift_m = 0.87 * snapToVertexSteps(zoom, snapped);
+    const PlaceVertices snapped_of = placedFrom(snapped);
     GlbOptions glb = glb_;
     glb.position_step_m = zoom.step;
     ZoomTiles& tiles = zooms_[zoom.zoom];
@@ -630,7 +632,7 @@ class CoarseZooms {
       const std::size_t count = std::min(kChunk, n - first);
       tbb::parallel_for(std::size_t{0}, count, [&](std::size_t j) {
         const std::size_t i = first + j;
-        DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped, normals, globe, content_scratch_.local());
+        DrawnContent c = drawnContent(zoom.tiles[i], mesh, snapped_of, normals, globe, content_scratch_.local());
         tiles.regions[before + i] = drawnRegion(c.positions, c.triangle_indices);
         bytes[j] = encodeContent(c, glb, &bits[j]);
         if (factor_ > 1) {

@@ -1,6 +1,5 @@
 #include "src/pipeline/run_pipeline.h"
 
-#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
@@ -111,21 +110,13 @@ void validateOptions(const BuildOptions& options) {
 
 // The largest side of the ECEF box of the tiles' vertices: what their quantisation must span.
 // Tiles in parallel (a maximum: the same for any order).
-double widestTileExtent(const std::vector<PyramidTile>& tiles, const TinMesh& mesh, std::span<const EcefPoint> ecef) {
+double widestTileExtent(const std::vector<PyramidTile>& tiles, const TinMesh& mesh, const PlaceVertices& place,
+                        tbb::enumerable_thread_specific<ContentScratch>& scratch) {
   std::vector<double> widest(tiles.size(), 0.0);
-  tbb::parallel_for(std::size_t{0}, tiles.size(), [&](std::size_t i) {
-    EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-    const PyramidTile& tile = tiles[i];
-    for (std::size_t c = 0; c < 3 * tile.triangleCount(); ++c) {
-      const EcefPoint& p = ecef[tile.corner(mesh, c / 3, c % 3)];
-      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-    }
-    widest[i] = std::max({0.0, hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-  });
+  tbb::parallel_for(std::size_t{0}, tiles.size(),
+                    [&](std::size_t i) { widest[i] = tileExtent(tiles[i], mesh, place, scratch.local()); });
   return widest.empty() ? 0.0 : *std::max_element(widest.begin(), widest.end());
 }
-
 
 // What one zoom shows: a level mesh and the triangles of each of its tiles.
 struct ZoomContent {
@@ -307,24 +298,24 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   summary.generator = glb.generator;
   std::size_t total_tiles = 0;
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
+#if defined(__GLIBC__)
+  // glibc keeps what the levels freed (85 MB of SRTM Gabon's 317 MB here) for reuse, and the
+  // writing's arrays mostly take other sizes: give it back before they come.
+  malloc_trim(0);
+#endif
   progress.beginStage("writing tiles", total_tiles);
   const std::size_t zoom_count = zooms.size();
   // vertex_grid[k][v] (below): the zoom whose grid vertex v of zoom k snaps to, as a byte.
   constexpr std::uint8_t kOwnGrid = 255;  // while the chain is followed: not inherited
   TERRATILES_ASSERT(zoom_count < kOwnGrid);
-  // A zoom's vertices on the globe, placed when needed (for its widest tile, then for its
-  // tiles) instead of held for every zoom at once: placing a lattice vertex is a look-up.
-  const auto placedVertices = [&](const ZoomContent& zoom) {
-    std::vector<EcefPoint> ecef(zoom.mesh->vertices.size());
-    globe.place(zoom.mesh->vertices, {}, ecef);
-    return ecef;
-  };
-  // Each zoom's outline and widest tile on its own (zooms in parallel).
+  // Each zoom's outline and widest tile on its own (zooms in parallel). A tile's vertices are
+  // placed on the globe when it needs them (placing a lattice vertex is a look-up).
+  tbb::enumerable_thread_specific<ContentScratch> content_scratch;
   std::vector<std::vector<std::uint8_t>> outline(zoom_count);
   std::vector<double> widest_m(zoom_count);
   tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
     outline[k] = tileOutlineVertices(*zooms[k].mesh, zooms[k].tiles);
-    widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, placedVertices(zooms[k]));
+    widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, placedOnGlobe(globe, *zooms[k].mesh), content_scratch);
   });
   // The shared quantisation grid: --position-step, or the step at which the finest zoom's
   // widest tile takes --draco-position-bits.
@@ -378,39 +369,30 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   // Per zoom and tile: what is written and what the tileset needs. Workers write into these
   // pre-sized slots; the files are written in a fixed order.
   std::vector<std::vector<EncodedTile>> written(zoom_count);
-  // Per zoom: its vertices snapped to their grids, and their normals (from the whole level).
-  // The snapped points take the place of the zoom's ECEF points, which nothing needs after.
+  // Per zoom: its vertices' normals (from the whole level, placed on the globe for them and
+  // let go) and the largest grid step they snap to. Its tiles place and snap their own.
   struct ZoomVertices {
-    std::vector<EcefPoint> snapped;
     std::vector<FloatNormal> normals;
     double largest_step_m = 0;
   };
   const auto zoomVertices = [&](std::size_t k) {
     const ZoomContent& level = zooms[k];
     ZoomVertices out;
-    out.snapped = placedVertices(level);
-    out.normals = levelNormals(*level.mesh, out.snapped);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.snapped.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                        for (std::size_t v = range.begin(); v < range.end(); ++v) {
-                          const double step = zoom_step_m[vertex_grid[k][v]];
-                          EcefPoint& p = out.snapped[v];
-                          p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
-                        }
-                      });
+    std::vector<EcefPoint> ecef(level.mesh->vertices.size());
+    globe.place(level.mesh->vertices, {}, ecef);
+    out.normals = levelNormals(*level.mesh, std::move(ecef));
     for (const std::uint8_t g : vertex_grid[k]) out.largest_step_m = std::max(out.largest_step_m, zoom_step_m[g]);
-    vertex_grid[k] = std::vector<std::uint8_t>();
     return out;
   };
   std::vector<GlbOptions> zoom_glb(zoom_count, glb);
   const PixelBoxes boxes(globe);
-  tbb::enumerable_thread_specific<ContentScratch> content_scratch;
-  // A zoom written, drawn and measured: its mesh, tiles' faces and clusters are let go, so
-  // that the finest zooms' memory serves the coarser ones (the tile keys stay for the tileset).
-  const auto releaseZoom = [&](std::size_t k) {
+  // A zoom's tiles made: its mesh and tiles' faces are let go (the tile keys stay for the
+  // tileset), so that the finest zooms' memory serves the coarser ones and is not held beside
+  // both zoom surfaces while the next zoom is made. Its cluster map goes when its maps are
+  // drawn.
+  const auto releaseMesh = [&](std::size_t k) {
     for (PyramidTile& tile : zooms[k].tiles) tile.faces = std::vector<std::uint32_t>();
     zooms[k].mesh = nullptr;
-    zooms[k].cluster_map = ClusterMap();
     if (options.lod == LodMethod::Grid) {
       pyramid.levels[k].mesh = TinMesh();
     } else {
@@ -465,9 +447,10 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
         return level.tiles[i].triangleCount() > level.tiles[j].triangleCount();
       });
+      const PlaceVertices snapped = placedOnGlobe(globe, *level.mesh, &vertex_grid[k], &zoom_step_m);
       forEachLargestFirst(order, [&](std::size_t i) {
         const DrawnContent content =
-            drawnContent(level.tiles[i], *level.mesh, vertices.snapped, vertices.normals, globe, content_scratch.local());
+            drawnContent(level.tiles[i], *level.mesh, snapped, vertices.normals, globe, content_scratch.local());
         EncodedTile& out = tiles[i];
         out.measure = measureDrawnTile(globe, content.positions, content.grid, content.triangle_indices, shift_m, finer,
                                        &surface, {}, &boxes);
@@ -480,6 +463,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         zoom_summary.position_bits = std::max(zoom_summary.position_bits, tile.position_bits);
       }
       vertices = {};
+      vertex_grid[k] = std::vector<std::uint8_t>();
+      releaseMesh(k);
       if (k > 0) preparing.run([&, k] { coarser_vertices = zoomVertices(k - 1); });
       writing.wait();  // the finer zoom's files
       writing.run([&, k] {
@@ -491,7 +476,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         }
       });
       finishing.wait();  // the finer zoom's: done with its surface, which the next zoom takes
-      if (k + 1 < zoom_count) releaseZoom(k + 1);
+      if (k + 1 < zoom_count) zooms[k + 1].cluster_map = ClusterMap();
       finishing.run([&, k] {
         const ZoomSurface& drawn = surfaces[k % 2];
         ZoomSummary& finished_summary = zoom_summaries[k];

@@ -5,6 +5,7 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 #include <bit>
 #include <cmath>
 #include <filesystem>
@@ -37,10 +38,10 @@ double roundUpToMicrometre(double metres) {
   return std::max(rounded, 1e-6);
 }
 
-// Unit normals in ECEF of a level's vertices from the whole level mesh (area-weighted face
-// normals), so shading is continuous across tiles; an unused vertex gets the ellipsoid normal.
-// Summed and normalised in doubles, kept as floats.
-std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
+namespace {
+
+// levelNormals (tile_output.h) in doubles: summed and normalised in them.
+std::vector<EcefPoint> unitNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
   const std::size_t n = mesh.vertices.size();
   std::vector<EcefPoint> normals(n, EcefPoint{});
   const auto& idx = mesh.triangle_indices;
@@ -70,31 +71,99 @@ std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::span<const EcefP
     nrm.y /= length;
     nrm.z /= length;
   }
-  std::vector<FloatNormal> kept(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  return normals;
+}
+
+std::vector<FloatNormal> asFloats(const std::vector<EcefPoint>& normals) {
+  std::vector<FloatNormal> kept(normals.size());
+  for (std::size_t i = 0; i < normals.size(); ++i) {
     kept[i] = {static_cast<float>(normals[i].x), static_cast<float>(normals[i].y), static_cast<float>(normals[i].z)};
   }
   return kept;
 }
 
-// Vertices take their tile index in order of first appearance in the tile's triangles; one
-// whose snapped point equals an earlier one's is welded to it (the first seen keeps its place
-// and the others take it; found by hashing, which gives what a stable sort by point did).
-DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
-                          std::span<const FloatNormal> normals, const DemOnGlobe& globe, ContentScratch& scratch) {
-  DrawnContent out;
-  const std::size_t triangles = tile.triangleCount();
+}  // namespace
+
+std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
+  return asFloats(unitNormals(mesh, ecef));
+}
+
+std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::vector<EcefPoint>&& ecef) {
+  const std::vector<EcefPoint> normals = unitNormals(mesh, ecef);
+  ecef = std::vector<EcefPoint>();
+  return asFloats(normals);
+}
+
+PlaceVertices placedOnGlobe(const DemOnGlobe& globe, const TinMesh& mesh, const std::vector<std::uint8_t>* grid_of,
+                            const std::vector<double>* step_m) {
+  return [&globe, &mesh, grid_of, step_m](std::span<const std::uint32_t> vertices, std::span<EcefPoint> ecef,
+                                          std::vector<GridPoint>& grid) {
+    grid.resize(vertices.size());
+    for (std::size_t i = 0; i < vertices.size(); ++i) grid[i] = mesh.vertices[vertices[i]];
+    // Isolated: while it waits for its parallel parts, this thread must not take up another
+    // tile, whose work would reuse the caller's per-thread scratch.
+    tbb::this_task_arena::isolate([&] { globe.place(grid, {}, ecef); });
+    if (!grid_of) return;
+    for (std::size_t i = 0; i < vertices.size(); ++i) {
+      const double step = (*step_m)[(*grid_of)[vertices[i]]];
+      EcefPoint& p = ecef[i];
+      p = {snapToStep(p.x, step), snapToStep(p.y, step), snapToStep(p.z, step)};
+    }
+  };
+}
+
+PlaceVertices placedFrom(std::span<const EcefPoint> snapped) {
+  return [snapped](std::span<const std::uint32_t> vertices, std::span<EcefPoint> ecef, std::vector<GridPoint>&) {
+    for (std::size_t i = 0; i < vertices.size(); ++i) ecef[i] = snapped[vertices[i]];
+  };
+}
+
+namespace {
+
+// The tile's level vertices in order of first appearance in its triangles (scratch.seen;
+// scratch.local_of[v]: v's place there, until forgetTileVertices), placed (scratch.placed).
+void placeTileVertices(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& place, ContentScratch& scratch) {
   std::vector<std::uint32_t>& local_of = scratch.local_of;
   if (local_of.size() < mesh.vertices.size()) local_of.resize(mesh.vertices.size(), kNotInTile);
-  // The level's vertices in order of first appearance (local_of: their place in it).
   std::vector<std::uint32_t>& seen = scratch.seen;
   seen.clear();
-  for (std::size_t c = 0; c < 3 * triangles; ++c) {
+  for (std::size_t c = 0; c < 3 * tile.triangleCount(); ++c) {
     const std::uint32_t v = tile.corner(mesh, c / 3, c % 3);
     if (local_of[v] != kNotInTile) continue;
     local_of[v] = static_cast<std::uint32_t>(seen.size());
     seen.push_back(v);
   }
+  scratch.placed.resize(seen.size());
+  place(seen, scratch.placed, scratch.grid);
+}
+
+void forgetTileVertices(ContentScratch& scratch) {
+  for (const std::uint32_t v : scratch.seen) scratch.local_of[v] = kNotInTile;
+}
+
+}  // namespace
+
+double tileExtent(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& place, ContentScratch& scratch) {
+  placeTileVertices(tile, mesh, place, scratch);
+  forgetTileVertices(scratch);
+  EcefPoint lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (const EcefPoint& p : scratch.placed) {
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  return std::max({0.0, hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+}
+
+// Vertices take their tile index in order of first appearance in the tile's triangles; one
+// whose snapped point equals an earlier one's is welded to it (the first seen keeps its place
+// and the others take it; found by hashing, which gives what a stable sort by point did).
+DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& snapped,
+                          std::span<const FloatNormal> normals, const DemOnGlobe& globe, ContentScratch& scratch) {
+  DrawnContent out;
+  const std::size_t triangles = tile.triangleCount();
+  placeTileVertices(tile, mesh, snapped, scratch);
+  const std::vector<std::uint32_t>& local_of = scratch.local_of;
+  const std::vector<std::uint32_t>& seen = scratch.seen;
   std::size_t capacity = 16;
   while (capacity < 2 * seen.size()) capacity *= 2;
   std::vector<std::uint32_t>& slots = scratch.slots;
@@ -106,11 +175,11 @@ DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::spa
   out.grid.reserve(seen.size());
   for (std::size_t i = 0; i < seen.size(); ++i) {
     const std::uint32_t v = seen[i];
-    const EcefPoint& p = snapped[v];
+    const EcefPoint& p = scratch.placed[i];
     std::size_t slot = pointHash(p) & (capacity - 1);
     bool welded = false;
     for (; slots[slot] != kNotInTile; slot = (slot + 1) & (capacity - 1)) {
-      const EcefPoint& q = snapped[seen[slots[slot]]];
+      const EcefPoint& q = scratch.placed[slots[slot]];
       if (p.x == q.x && p.y == q.y && p.z == q.z) {
         tile_vertex[i] = tile_vertex[slots[slot]];  // seen earlier
         welded = true;
@@ -134,7 +203,7 @@ DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::spa
                         c = tile_vertex[local_of[tile.corner(mesh, t, 2)]];
     if (a != b && b != c && c != a) out.triangle_indices.insert(out.triangle_indices.end(), {a, b, c});
   }
-  for (const std::uint32_t v : seen) local_of[v] = kNotInTile;
+  forgetTileVertices(scratch);
   return out;
 }
 

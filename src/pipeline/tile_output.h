@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <map>
 #include <span>
@@ -36,6 +37,9 @@ using FloatNormal = std::array<float, 3>;
 // normals), so shading is continuous across tiles; an unused vertex gets the ellipsoid normal.
 // Summed and normalised in doubles, kept as floats.
 std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef);
+// The same, letting the points go before the floats are made (48 bytes per vertex at most
+// instead of 60).
+std::vector<FloatNormal> levelNormals(const TinMesh& mesh, std::vector<EcefPoint>&& ecef);
 
 // One tile's content exactly as a decoder gives it back: every vertex at its position on the
 // zoom's quantisation grids (snapped), vertices that snap to one point welded into one (the
@@ -51,19 +55,39 @@ struct DrawnContent {
 // Marks a level vertex not (yet) in the tile drawnContent is making.
 inline constexpr std::uint32_t kNotInTile = std::numeric_limits<std::uint32_t>::max();
 
-// Per thread scratch for drawnContent, reused from tile to tile.
+// Per thread scratch for drawnContent and tileExtent, reused from tile to tile.
 struct ContentScratch {
   // An entry per level vertex (at least), every entry kNotInTile between calls.
   std::vector<std::uint32_t> local_of;
   std::vector<std::uint32_t> seen;
+  std::vector<EcefPoint> placed;     // per entry of seen
   std::vector<std::uint32_t> tile_vertex;
   std::vector<std::uint32_t> slots;  // open addressing over snapped points: an index into seen
+  std::vector<GridPoint> grid;       // for a PlaceVertices
 };
 
+// Where a zoom's vertices are drawn, a tile's at a time: ecef[i] for the level vertex
+// vertices[i] (`grid`: the caller's scratch). A tile's vertices are placed when it is made,
+// instead of every vertex of the zoom at once: 24 bytes per vertex of the finest zoom, 30 MB
+// on SRTM Gabon, was the largest array of the writing peak.
+using PlaceVertices = std::function<void(std::span<const std::uint32_t> vertices, std::span<EcefPoint> ecef,
+                                         std::vector<GridPoint>& grid)>;
+
+// Places the level vertices with the DEM's globe, then snaps each to the grid of
+// `step_m[grid_of[vertex]]` (nullptr: not snapped).
+PlaceVertices placedOnGlobe(const DemOnGlobe& globe, const TinMesh& mesh, const std::vector<std::uint8_t>* grid_of = nullptr,
+                            const std::vector<double>* step_m = nullptr);
+// The same from a zoom's vertices placed and snapped all at once.
+PlaceVertices placedFrom(std::span<const EcefPoint> snapped);
+
+// The largest side of the ECEF box of the tile's vertices, as `place` puts them.
+double tileExtent(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& place, ContentScratch& scratch);
+
 // Vertices take their tile index in order of first appearance in the tile's triangles; one
-// whose snapped point equals an earlier one's is welded to it (the first seen keeps its place
-// and the others take it; found by hashing, which gives what a stable sort by point did).
-DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, std::span<const EcefPoint> snapped,
+// whose snapped point (from `snapped`) equals an earlier one's is welded to it (the first
+// seen keeps its place and the others take it; found by hashing, which gives what a stable
+// sort by point did).
+DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& snapped,
                           std::span<const FloatNormal> normals, const DemOnGlobe& globe, ContentScratch& scratch);
 
 struct EncodedTile {

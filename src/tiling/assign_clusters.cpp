@@ -241,49 +241,51 @@ std::vector<TileKey> TileFrame::tilesIntersecting(const TileBounds& box, std::in
 
 namespace {
 
-// The tiles each face's bounding box (in scheme coordinates) shares area with, as CSR.
-struct FaceTiles {
-  std::vector<std::uint32_t> offset;
-  std::vector<TileKey> tiles;
-};
-
-FaceTiles faceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vector<std::array<double, 2>>& scheme,
-                    std::int32_t zoom) {
-  const std::size_t face_count = mesh.triangleCount();
-  const auto& idx = mesh.triangle_indices;
-  // In parallel blocks of faces (the scheme's functions are pure), joined in face order.
-  constexpr std::size_t kBlock = 4096;
-  const std::size_t blocks = (face_count + kBlock - 1) / kBlock;
-  std::vector<FaceTiles> parts(blocks);
-  tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
-    FaceTiles& part = parts[b];
-    const std::size_t first = b * kBlock, last = std::min(face_count, first + kBlock);
-    part.offset.reserve(last - first);
-    part.tiles.reserve((last - first) + (last - first) / 4);
-    for (std::size_t f = first; f < last; ++f) {
-      TileBounds box{1e300, 1e300, -1e300, -1e300};
-      for (std::size_t k = 0; k < 3; ++k) {
-        const auto& p = scheme[idx[3 * f + k]];
-        box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+// The tiles each face's bounding box (in scheme coordinates) shares area with, in blocks of
+// kBlock faces (each block its own CSR: joining them into one array held both copies at once,
+// 40 MB more at SRTM Gabon's finest level).
+class FaceTiles {
+ public:
+  FaceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vector<std::array<double, 2>>& scheme,
+            std::int32_t zoom) {
+    const std::size_t face_count = mesh.triangleCount();
+    const auto& idx = mesh.triangle_indices;
+    // In parallel blocks of faces (the scheme's functions are pure).
+    blocks_.resize((face_count + kBlock - 1) / kBlock);
+    tbb::parallel_for(std::size_t{0}, blocks_.size(), [&](std::size_t b) {
+      Block& block = blocks_[b];
+      const std::size_t first = b * kBlock, last = std::min(face_count, first + kBlock);
+      block.end.reserve(last - first);
+      block.tiles.reserve((last - first) + (last - first) / 4);
+      for (std::size_t f = first; f < last; ++f) {
+        TileBounds box{1e300, 1e300, -1e300, -1e300};
+        for (std::size_t k = 0; k < 3; ++k) {
+          const auto& p = scheme[idx[3 * f + k]];
+          box = {std::min(box.west, p[0]), std::min(box.south, p[1]), std::max(box.east, p[0]), std::max(box.north, p[1])};
+        }
+        for (const TileKey& key : frame.tilesIntersecting(box, zoom)) block.tiles.push_back(key);
+        block.end.push_back(static_cast<std::uint32_t>(block.tiles.size()));
       }
-      for (const TileKey& key : frame.tilesIntersecting(box, zoom)) part.tiles.push_back(key);
-      part.offset.push_back(static_cast<std::uint32_t>(part.tiles.size()));  // this face's end within the block
-    }
-  });
-  FaceTiles out;
-  out.offset.assign(face_count + 1, 0);
-  std::size_t total = 0;
-  for (const FaceTiles& part : parts) total += part.tiles.size();
-  TERRATILES_ASSERT(total <= std::numeric_limits<std::uint32_t>::max());  // (the input's size limit keeps it far below)
-  out.tiles.reserve(total);
-  for (std::size_t b = 0; b < blocks; ++b) {
-    const auto base = static_cast<std::uint32_t>(out.tiles.size());
-    for (std::size_t i = 0; i < parts[b].offset.size(); ++i) out.offset[b * kBlock + i + 1] = base + parts[b].offset[i];
-    out.tiles.insert(out.tiles.end(), parts[b].tiles.begin(), parts[b].tiles.end());
-    parts[b] = FaceTiles();  // joined: its memory serves the next blocks
+      block.tiles.shrink_to_fit();
+    });
   }
-  return out;
-}
+
+  // The tiles of face f.
+  std::span<const TileKey> of(std::size_t f) const {
+    const Block& block = blocks_[f / kBlock];
+    const std::size_t i = f % kBlock;
+    const std::uint32_t begin = i == 0 ? 0 : block.end[i - 1];
+    return {block.tiles.data() + begin, block.end[i] - begin};
+  }
+
+ private:
+  static constexpr std::size_t kBlock = 4096;
+  struct Block {
+    std::vector<std::uint32_t> end;  // per face of the block: the end of its tiles in `tiles`
+    std::vector<TileKey> tiles;
+  };
+  std::vector<Block> blocks_;
+};
 
 }  // namespace
 
@@ -455,9 +457,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
   const auto& idx = mesh.triangle_indices;
   const auto corner = [&](std::size_t f, int k) { return scheme[idx[3 * f + static_cast<std::size_t>(k)]]; };
 
-  const FaceTiles face_tiles_csr = faceTiles(frame, mesh, scheme, zoom);
-  const std::vector<std::uint32_t>& tile_offset = face_tiles_csr.offset;
-  const std::vector<TileKey>& face_tiles = face_tiles_csr.tiles;
+  const FaceTiles face_tiles(frame, mesh, scheme, zoom);
 
   // Own clusters: the tile of each one's centroid.
   const FacePartition& own = level.partition;
@@ -494,7 +494,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
     std::vector<std::set<std::pair<std::int32_t, std::int32_t>>> sets(static_cast<std::size_t>(clusters.cluster_count));
     for (std::size_t f = 0; f < face_count; ++f) {
       auto& set = sets[static_cast<std::size_t>(clusters.cluster_of_face[f])];
-      for (std::size_t i = tile_offset[f]; i < tile_offset[f + 1]; ++i) set.insert({face_tiles[i].y, face_tiles[i].x});
+      for (const TileKey& key : face_tiles.of(f)) set.insert({key.y, key.x});
     }
     std::vector<std::vector<TileKey>> crossed(sets.size());
     for (std::size_t c = 0; c < sets.size(); ++c) {
@@ -508,7 +508,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
     else inherited_crossed = crossedTiles(inherited);
   }
   if (!by_face && assignment == Assignment::Merge && has_inherited) inherited_crossed = crossedTiles(inherited);
-  const auto append = [](std::vector<TileKey>& to, const std::vector<TileKey>& from) {
+  const auto append = [](std::vector<TileKey>& to, std::span<const TileKey> from) {
     to.insert(to.end(), from.begin(), from.end());
   };
 
@@ -517,8 +517,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
   for (std::size_t f = 0; f < face_count; ++f) {
     targets.clear();
     if (by_face) {
-      targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),
-                     face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f + 1]));
+      append(targets, face_tiles.of(f));
     } else switch (assignment) {
       case Assignment::Centroid:
         targets.push_back(has_own ? own_cluster_tiles[static_cast<std::size_t>(own.cluster_of_face[f])] : inheritedTile(f));
@@ -536,8 +535,7 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
         if (has_inherited) {
           append(targets, inherited_crossed[static_cast<std::size_t>(inherited.cluster_of_face[f])]);
         } else {
-          targets.insert(targets.end(), face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f]),
-                         face_tiles.begin() + static_cast<std::ptrdiff_t>(tile_offset[f + 1]));
+          append(targets, face_tiles.of(f));
         }
         break;
     }
@@ -552,7 +550,10 @@ std::vector<TileFaces> assignClusters(const TileFrame& frame, const Level& level
   }
   std::vector<TileFaces> tiles;
   tiles.reserve(faces_of_tile.size());
-  for (auto& [yx, triangles] : faces_of_tile) tiles.push_back({TileKey{zoom, yx.second, yx.first}, std::move(triangles)});
+  for (auto& [yx, triangles] : faces_of_tile) {
+    triangles.shrink_to_fit();  // held until the zoom is written: without the growth's slack
+    tiles.push_back({TileKey{zoom, yx.second, yx.first}, std::move(triangles)});
+  }
   return tiles;
 }
 
