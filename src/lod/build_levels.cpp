@@ -8,6 +8,7 @@
 #include <string>
 
 #include "src/base/error.h"
+#include "src/base/freed_memory.h"
 #include "src/partition/face_graph.h"
 #include "src/simplify/simplify_clusters.h"
 
@@ -185,6 +186,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     }
     progress.endStage();
 
+    returnFreedMemory();  // the face graph and METIS's workspace, which the simplification does not reuse
     if (options.globe && vertex_ecef.empty()) {
       progress.beginStage("level " + std::to_string(l) + ": placing vertices", 0);
       placeVertices();

@@ -24,10 +24,6 @@
 #include <cerrno>
 #include <cstring>
 
-#if defined(__GLIBC__)
-#include <malloc.h>
-#endif
-
 #include <nlohmann/json.hpp>
 
 #include "formats/geoid/read_geoid.h"
@@ -35,6 +31,7 @@
 #include "formats/output_directory.h"
 #include "src/base/block_record.h"
 #include "src/base/error.h"
+#include "src/base/freed_memory.h"
 #include "src/base/largest_first.h"
 #include "src/base/ranks.h"
 #include "src/base/version.h"
@@ -1469,9 +1466,7 @@ BuildSummary runBlockedPipeline(const BuildOptions& options, const DemMosaic& mo
   progress.endStage();
   globe_storage.reset();
   dem_storage.reset();
-#if defined(__GLIBC__)
-  malloc_trim(0);
-#endif
+  returnFreedMemory();
   DemStatistics stats;
   WrittenZooms top = coarse.measure(drawn_below, options.strip_pixels, stats, progress);
   for (const auto& [zoom, tally] : top.tallies) tallies[zoom] = tally;

@@ -20,15 +20,12 @@
 
 #include <nlohmann/json.hpp>
 
-#if defined(__GLIBC__)
-#include <malloc.h>
-#endif
-
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
 #include "formats/gltf/write_glb.h"
 #include "formats/output_directory.h"
 #include "src/base/error.h"
+#include "src/base/freed_memory.h"
 #include "src/base/version.h"
 #include "src/geo/crs_transform.h"
 #include "src/geo/geoid.h"
@@ -256,6 +253,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       levels.emplace_back();
       levels[0].mesh = std::move(finest.mesh);
     }
+    returnFreedMemory();  // what building the levels freed
     progress.beginStage("assigning clusters to tiles", levels.size());
     std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;
     for (std::size_t l = 0; l < levels.size(); ++l) {
@@ -298,11 +296,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   summary.generator = glb.generator;
   std::size_t total_tiles = 0;
   for (const ZoomContent& level : zooms) total_tiles += level.tiles.size();
-#if defined(__GLIBC__)
-  // glibc keeps what the levels freed (85 MB of SRTM Gabon's 317 MB here) for reuse, and the
-  // writing's arrays mostly take other sizes: give it back before they come.
-  malloc_trim(0);
-#endif
+  returnFreedMemory();  // what the levels and the assignment freed
   progress.beginStage("writing tiles", total_tiles);
   const std::size_t zoom_count = zooms.size();
   // vertex_grid[k][v] (below): the zoom whose grid vertex v of zoom k snaps to, as a byte.
@@ -554,11 +548,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     pyramid = {};
     frame.reset();
     globe_storage.reset();
-#if defined(__GLIBC__)
-    // glibc keeps most of what was freed (the levels' many mid-sized arrays) for reuse; the
-    // check does not reuse it: give it back.
-    malloc_trim(0);
-#endif
+    returnFreedMemory();  // the levels' many mid-sized arrays, which the check does not reuse
     progress.endStage();
     std::optional<CheckReport> check;
     if (options.report_check_cuts > 0) {
