@@ -174,7 +174,7 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
                                       " vertex positions on the globe for " + std::to_string(mesh.vertices.size()) +
                                       " vertices; expected one per vertex");
   }
-  const InputTopology topology = buildTopology(mesh);
+  InputTopology topology = buildTopology(mesh);
 
   std::vector<std::uint64_t> constrained_keys;
   constrained_keys.reserve(constrained_edges.size());
@@ -221,6 +221,10 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
   in.faces_by_cluster = &faces_by_cluster;
   const std::vector<ClusterOutput> outputs =
       options.simplifier == Simplifier::Cgal ? collapseWithCgal(in) : collapseNatively(in);
+  // Not needed to assemble the coarser mesh, which would otherwise be made beside them (16
+  // bytes per input face, 40 MB at SRTM Gabon's level 0).
+  topology = InputTopology();
+  faces_by_cluster = std::vector<std::uint32_t>();
 
   // Assemble by vertex index: a vertex shared by clusters is locked in each, so it is the same
   // input vertex at the same input position in all of them.
