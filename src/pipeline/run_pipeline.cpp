@@ -309,7 +309,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   std::vector<double> widest_m(zoom_count);
   tbb::parallel_for(std::size_t{0}, zoom_count, [&](std::size_t k) {
     outline[k] = tileOutlineVertices(*zooms[k].mesh, zooms[k].tiles);
-    widest_m[k] = widestTileExtent(zooms[k].tiles, *zooms[k].mesh, placedOnGlobe(globe, *zooms[k].mesh), content_scratch);
+    widest_m[k] =
+        widestTileExtent(zooms[k].tiles, *zooms[k].mesh, placedOnGlobe(globe, *zooms[k].mesh), content_scratch);
   });
   // The shared quantisation grid: --position-step, or the step at which the finest zoom's
   // widest tile takes --draco-position-bits.

@@ -122,7 +122,8 @@ namespace {
 
 // The tile's level vertices in order of first appearance in its triangles (scratch.seen;
 // scratch.local_of[v]: v's place there, until forgetTileVertices), placed (scratch.placed).
-void placeTileVertices(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& place, ContentScratch& scratch) {
+void placeTileVertices(const PyramidTile& tile, const TinMesh& mesh, const PlaceVertices& place,
+                       ContentScratch& scratch) {
   std::vector<std::uint32_t>& local_of = scratch.local_of;
   if (local_of.size() < mesh.vertices.size()) local_of.resize(mesh.vertices.size(), kNotInTile);
   std::vector<std::uint32_t>& seen = scratch.seen;

@@ -68,14 +68,15 @@ struct ContentScratch {
 
 // Where a zoom's vertices are drawn, a tile's at a time: ecef[i] for the level vertex
 // vertices[i] (`grid`: the caller's scratch). A tile's vertices are placed when it is made,
-// instead of every vertex of the zoom at once: 24 bytes per vertex of the finest zoom, 30 MB
-// on SRTM Gabon, was the largest array of the writing peak.
+// instead of every vertex of the zoom at once (24 bytes per vertex of the finest zoom, 30 MB
+// on SRTM Gabon, held while its tiles were made).
 using PlaceVertices = std::function<void(std::span<const std::uint32_t> vertices, std::span<EcefPoint> ecef,
                                          std::vector<GridPoint>& grid)>;
 
 // Places the level vertices with the DEM's globe, then snaps each to the grid of
 // `step_m[grid_of[vertex]]` (nullptr: not snapped).
-PlaceVertices placedOnGlobe(const DemOnGlobe& globe, const TinMesh& mesh, const std::vector<std::uint8_t>* grid_of = nullptr,
+PlaceVertices placedOnGlobe(const DemOnGlobe& globe, const TinMesh& mesh,
+                            const std::vector<std::uint8_t>* grid_of = nullptr,
                             const std::vector<double>* step_m = nullptr);
 // The same from a zoom's vertices placed and snapped all at once.
 PlaceVertices placedFrom(std::span<const EcefPoint> snapped);

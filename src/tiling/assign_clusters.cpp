@@ -242,8 +242,8 @@ std::vector<TileKey> TileFrame::tilesIntersecting(const TileBounds& box, std::in
 namespace {
 
 // The tiles each face's bounding box (in scheme coordinates) shares area with, in blocks of
-// kBlock faces (each block its own CSR: joining them into one array held both copies at once,
-// 40 MB more at SRTM Gabon's finest level).
+// kBlock faces, each block its own CSR (joining them into one array held both copies at once:
+// SRTM Gabon's assignment peaked about 30 MB higher).
 class FaceTiles {
  public:
   FaceTiles(const TileFrame& frame, const TinMesh& mesh, const std::vector<std::array<double, 2>>& scheme,
