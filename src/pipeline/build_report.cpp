@@ -51,12 +51,12 @@ json mapsJson(const std::vector<ZoomMaps>& maps) {
   json out = json::array();
   for (const ZoomMaps& m : maps) {
     out.push_back({{"zoom", m.zoom},
-                   {"width", m.clusters.width},
-                   {"height", m.clusters.height},
+                   {"width", m.width},
+                   {"height", m.height},
                    {"clusters", m.cluster_count},
                    {"error_scale_m", m.error_scale_m},
-                   {"clusters_png", dataUri(encodePng(m.clusters), "image/png")},
-                   {"error_png", dataUri(encodePng(m.error), "image/png")}});
+                   {"clusters_png", dataUri(m.clusters_png, "image/png")},
+                   {"error_png", dataUri(m.error_png, "image/png")}});
   }
   return out;
 }

@@ -96,17 +96,17 @@ ClusterMap mapClusters(const DemGrid& dem, const TinMesh& mesh, const FacePartit
   return map;
 }
 
-ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const TileFrame* frame, std::int32_t zoom,
-                      double error_scale_m, const ZoomSurface& surface) {
+ZoomMaps drawClusterMap(const DemGrid& dem, const ClusterMap& clusters, const TileFrame* frame, std::int32_t zoom) {
   const int scale = clusters.scale, width = clusters.width, height = clusters.height;
   const std::vector<std::int32_t>& map_cluster = clusters.cluster;
   const bool by_cluster = clusters.by_cluster;
   ZoomMaps maps;
   maps.zoom = zoom;
-  maps.error_scale_m = error_scale_m;
+  maps.width = width;
+  maps.height = height;
+  maps.scale = scale;
   maps.cluster_count = clusters.cluster_count;
-  maps.clusters = RgbImage(width, height, 235);
-  maps.error = RgbImage(width, height, 235);
+  RgbImage image(width, height, 235);
   // Map pixel -> its tile.
   std::vector<GridPoint> centres;
   centres.reserve(map_cluster.size());
@@ -121,33 +121,13 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const Tile
     const std::vector<std::array<double, 2>> points = frame->toScheme(centres);
     tbb::parallel_for(std::size_t{0}, points.size(), [&](std::size_t i) { tile[i] = frame->tileAt(points[i], zoom); });
   }
-
-  tbb::parallel_for(0, height, [&](int my) {
-    for (int mx = 0; mx < width; ++mx) {
-      const std::size_t i = static_cast<std::size_t>(my) * width + mx;
-      // The largest error in the block (of the valid pixels the zoom draws).
-      float worst = std::nanf("");
-      for (int row = my * scale; row < std::min(dem.height, (my + 1) * scale); ++row) {
-        for (int col = mx * scale; col < std::min(dem.width, (mx + 1) * scale); ++col) {
-          const std::size_t pixel = dem.index(col, row);
-          if (!surface.drawn(pixel) || std::isnan(dem.heights_m[pixel])) continue;
-          const auto e = static_cast<float>(surface.error(pixel));
-          if (!std::isnan(e) && !(e <= worst)) worst = e;
-        }
-      }
-      if (!std::isnan(worst)) {
-        // In kErrorClasses steps: a classed map reads better and its PNG is a tenth the size.
-        const double t = error_scale_m > 0 ? std::min(1.0, worst / error_scale_m) : 0.0;
-        const auto c = errorColour(std::min(1.0, std::floor(t * kErrorClasses) / (kErrorClasses - 1)));
-        std::copy(c.begin(), c.end(), maps.error.at(mx, my));
-      }
-      const std::int32_t id = map_cluster[i];
-      if (id < 0) continue;
-      const auto c = by_cluster ? clusterColour(static_cast<std::uint32_t>(id))
-                               : clusterColour(static_cast<std::uint32_t>(tile[i].x * 7919 + tile[i].y));
-      std::copy(c.begin(), c.end(), maps.clusters.at(mx, my));
-    }
-  });
+  for (std::size_t i = 0; i < map_cluster.size(); ++i) {
+    const std::int32_t id = map_cluster[i];
+    if (id < 0) continue;
+    const auto c = by_cluster ? clusterColour(static_cast<std::uint32_t>(id))
+                              : clusterColour(static_cast<std::uint32_t>(tile[i].x * 7919 + tile[i].y));
+    std::copy(c.begin(), c.end(), image.at(static_cast<int>(i % width), static_cast<int>(i / width)));
+  }
   // Outlines over the colours: cluster borders black, tile outlines white (on top), where a
   // map pixel differs from its right or lower neighbour.
   for (int my = 0; my < height; ++my) {
@@ -162,7 +142,7 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const Tile
         cluster_border |= by_cluster && map_cluster[j] != map_cluster[i];
         tile_border |= frame && !(tile[j] == tile[i]);
       }
-      std::uint8_t* p = maps.clusters.at(mx, my);
+      std::uint8_t* p = image.at(mx, my);
       if (tile_border) {
         p[0] = p[1] = p[2] = 255;
       } else if (cluster_border) {
@@ -170,7 +150,34 @@ ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const Tile
       }
     }
   }
+  maps.clusters_png = encodePng(image);
   return maps;
+}
+
+void drawErrorMap(const DemGrid& dem, double error_scale_m, const ZoomSurface& surface, ZoomMaps& maps) {
+  const int scale = maps.scale, width = maps.width, height = maps.height;
+  maps.error_scale_m = error_scale_m;
+  RgbImage image(width, height, 235);
+  tbb::parallel_for(0, height, [&](int my) {
+    for (int mx = 0; mx < width; ++mx) {
+      // The largest error in the block (of the valid pixels the zoom draws).
+      float worst = std::nanf("");
+      for (int row = my * scale; row < std::min(dem.height, (my + 1) * scale); ++row) {
+        for (int col = mx * scale; col < std::min(dem.width, (mx + 1) * scale); ++col) {
+          const std::size_t pixel = dem.index(col, row);
+          if (!surface.drawn(pixel) || std::isnan(dem.heights_m[pixel])) continue;
+          const auto e = static_cast<float>(surface.error(pixel));
+          if (!std::isnan(e) && !(e <= worst)) worst = e;
+        }
+      }
+      if (std::isnan(worst)) continue;
+      // In kErrorClasses steps: a classed map reads better and its PNG is a tenth the size.
+      const double t = error_scale_m > 0 ? std::min(1.0, worst / error_scale_m) : 0.0;
+      const auto c = errorColour(std::min(1.0, std::floor(t * kErrorClasses) / (kErrorClasses - 1)));
+      std::copy(c.begin(), c.end(), image.at(mx, my));
+    }
+  });
+  maps.error_png = encodePng(image);
 }
 
 }  // namespace terratiles

@@ -17,10 +17,13 @@
 
 namespace terratiles {
 
+// The two maps as PNG files, each encoded as soon as it is drawn (a zoom's raw pixels would
+// otherwise wait beside the build's largest stages until the report is written).
 struct ZoomMaps {
   std::int32_t zoom = 0;
-  RgbImage clusters;
-  RgbImage error;
+  int width = 0, height = 0, scale = 1;  // the maps' pixels, and the DEM pixels a side of one covers
+  std::vector<std::uint8_t> clusters_png;
+  std::vector<std::uint8_t> error_png;
   double error_scale_m = 0;  // the error drawn in the ramp's last colour
   std::int32_t cluster_count = 0;
 };
@@ -38,9 +41,11 @@ struct ClusterMap {
 };
 ClusterMap mapClusters(const DemGrid& dem, const TinMesh& mesh, const FacePartition* partition, int max_side_px = 640);
 
-// frame: draws the zoom's tile outlines (nullptr: none). surface: the zoom's drawn surface
-// (its tiles as decoded, measured along every pixel's vertical), for the error map.
-ZoomMaps drawZoomMaps(const DemGrid& dem, const ClusterMap& clusters, const TileFrame* frame, std::int32_t zoom,
-                      double error_scale_m, const ZoomSurface& surface);
+// The cluster map of a zoom (error_png still empty). frame: draws the zoom's tile outlines
+// (nullptr: none).
+ZoomMaps drawClusterMap(const DemGrid& dem, const ClusterMap& clusters, const TileFrame* frame, std::int32_t zoom);
+// Adds the error map: surface is the zoom's drawn surface (its tiles as decoded, measured
+// along every pixel's vertical).
+void drawErrorMap(const DemGrid& dem, double error_scale_m, const ZoomSurface& surface, ZoomMaps& maps);
 
 }  // namespace terratiles

@@ -125,10 +125,10 @@ struct ZoomContent {
   // locked vertices a tile outline runs along live on); nullptr on the coarsest zoom and for
   // the grid pyramid.
   const std::vector<std::uint32_t>* index_in_coarser = nullptr;
-  // For the report's map (empty without a report): the clusters its tiles are made of (the
-  // finer level's, carried over; on the finest level its own; none for the grid pyramid),
-  // taken when the tiles are assigned.
-  ClusterMap cluster_map;
+  // For the report (empty without one): its maps, the cluster map drawn when the tiles are
+  // assigned (the clusters its tiles are made of: the finer level's, carried over; on the
+  // finest level its own; none for the grid pyramid), the error map when they are written.
+  ZoomMaps maps;
   std::vector<PyramidTile> tiles;
 };
 
@@ -177,7 +177,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   if (Ranks::rank() != 0) return {};  // under mpirun, a whole build is rank 0's alone
   OutputDirectory output(options.output_dir, options.force);
 
-  const DemGrid dem = readDem(mosaic, "reading DEM", progress);
+  DemGrid dem = readDem(mosaic, "reading DEM", progress);  // its pixels let go before the report's check
   const DemStatistics stats = computeStatistics(dem);
   const CrsToWgs84 to_wgs84(dem.crs_wkt);
   std::optional<GeoidGrid> geoid;
@@ -219,7 +219,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       content.step = level.step;
       content.mesh = &level.mesh;
       content.tiles = std::move(level.tiles);
-      if (options.report) content.cluster_map = mapClusters(dem, level.mesh, nullptr);
+      if (options.report) {
+        content.maps = drawClusterMap(dem, mapClusters(dem, level.mesh, nullptr), nullptr, level.zoom);
+      }
       zooms.push_back(std::move(content));
     }
   } else {
@@ -275,7 +277,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         content.tiles.push_back(std::move(pyramid_tile));
       }
       // The level's partitions served the assignment and, for the report, the cluster map.
-      if (options.report) content.cluster_map = mapClusters(dem, levels[l].mesh, map_clusters);
+      if (options.report) {
+        content.maps = drawClusterMap(dem, mapClusters(dem, levels[l].mesh, map_clusters), frame.get(), zoom);
+      }
       for (FacePartition* partition : {&levels[l].partition, &levels[l].inherited_partition}) {
         partition->cluster_of_face = std::vector<std::int32_t>();
       }
@@ -383,8 +387,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   const PixelBoxes boxes(globe);
   // A zoom's tiles made: its mesh and tiles' faces are let go (the tile keys stay for the
   // tileset), so that the finest zooms' memory serves the coarser ones and is not held beside
-  // both zoom surfaces while the next zoom is made. Its cluster map goes when its maps are
-  // drawn.
+  // both zoom surfaces while the next zoom is made.
   const auto releaseMesh = [&](std::size_t k) {
     for (PyramidTile& tile : zooms[k].tiles) tile.faces = std::vector<std::uint32_t>();
     zooms[k].mesh = nullptr;
@@ -471,7 +474,6 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         }
       });
       finishing.wait();  // the finer zoom's: done with its surface, which the next zoom takes
-      if (k + 1 < zoom_count) zooms[k + 1].cluster_map = ClusterMap();
       finishing.run([&, k] {
         const ZoomSurface& drawn = surfaces[k % 2];
         ZoomSummary& finished_summary = zoom_summaries[k];
@@ -485,9 +487,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
         }
         finished_summary.rms_error_m = drawn_pixels ? std::sqrt(sum_squares / static_cast<double>(drawn_pixels)) : 0.0;
         if (options.report) {
-          const ZoomContent& finished = zooms[k];
-          maps[k] = drawZoomMaps(dem, finished.cluster_map, frame.get(), finished.zoom,
-                                 finished_summary.max_error_m, drawn);
+          drawErrorMap(dem, finished_summary.max_error_m, drawn, zooms[k].maps);
+          maps[k] = std::move(zooms[k].maps);
         }
       });
       preparing.wait();
@@ -541,14 +542,17 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   // The report: maps per zoom, the check of what was written, then report.json and .html.
   if (options.report) {
-    // The levels are written and drawn: free them (and the pixels on the globe) before the
-    // check decodes every tile.
+    // The levels are written and drawn: free them (and the pixels on the globe, the DEM's
+    // heights and the geoid) before the check, which reads the DEM and the geoid itself and
+    // decodes every tile.
     progress.beginStage("letting the levels go", 0);
     zooms = {};
     levels = {};
     pyramid = {};
     frame.reset();
     globe_storage.reset();
+    dem.heights_m = std::vector<float>();
+    geoid.reset();
     returnFreedMemory();  // the levels' many mid-sized arrays, which the check does not reuse
     progress.endStage();
     std::optional<CheckReport> check;
