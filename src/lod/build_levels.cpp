@@ -196,6 +196,7 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
                             std::to_string(level.partition.cluster_count) + " clusters", 0);
     SimplifyOptions simplify;
     simplify.simplifier = options.simplifier;
+    simplify.tail_stop = options.tail_stop;
     simplify.edge_ratio = options.level_ratio;
     simplify.metres_per_col = metres[0];
     simplify.metres_per_row = metres[1];

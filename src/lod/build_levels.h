@@ -52,6 +52,7 @@ struct LevelOptions {
   // The edge-collapse engine: CGAL's edge collapse (the default, the quality reference) or
   // native (terratiles' own over flat arrays, faster; simplify_clusters.h).
   Simplifier simplifier = Simplifier::Native;
+  TailStop tail_stop;  // the native engine's (SimplifyOptions::tail_stop)
   // Target edge ratio of one simplification (paper: 0.5).
   double level_ratio = 0.5;
   // Error budget of level l (l >= 1): first_budget_m * level_error_growth^(l - 1); 0 or

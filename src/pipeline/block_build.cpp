@@ -875,6 +875,7 @@ LevelOptions buildLevelOptions(const BuildOptions& options, const DemOnGlobe& gl
   level_options.clusters_per_level = std::move(clusters);
   level_options.level_ratio = options.level_ratio;
   level_options.simplifier = options.simplifier;
+  level_options.tail_stop = options.tail_stop;
   level_options.measure = false;
   if (options.level_error_growth > 0) {
     level_options.level_error_growth = options.level_error_growth;
@@ -1019,6 +1020,7 @@ nlohmann::json blockManifest(const BuildOptions& options, std::int32_t block_pix
   m["global_partition"] = options.global_partition;
   m["level_ratio"] = options.level_ratio;
   m["simplifier"] = options.simplifier == Simplifier::Cgal ? "cgal" : "native";
+  m["tail_stop"] = tailStopName(options.tail_stop);
   m["level_error_growth"] = options.level_error_growth;
   m["heights"] = options.heights == HeightReference::Orthometric ? "orthometric" : "ellipsoidal";
   m["geoid"] = options.geoid_path;

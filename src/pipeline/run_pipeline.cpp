@@ -237,6 +237,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     level_options.clusters_per_level = plan.clusters_per_level;
     level_options.level_ratio = options.level_ratio;
     level_options.simplifier = options.simplifier;
+    level_options.tail_stop = options.tail_stop;
     level_options.measure = false;  // the tiles are measured as drawn
     if (options.level_error_growth > 0) {
       level_options.level_error_growth = options.level_error_growth;

@@ -47,6 +47,9 @@ struct BuildOptions {
   bool global_partition = false;
   double level_ratio = 0.5;            // clusters: edges kept per simplification
   Simplifier simplifier = Simplifier::Native;  // clusters: the edge-collapse engine
+  // clusters, native engine: SimplifyOptions::tail_stop. On ETOPO5 at 10 m it takes a quarter
+  // off the simplification for up to 5 % more triangles per zoom (still 4-9 % fewer than CGAL's).
+  TailStop tail_stop = kDefaultTailStop;
   double level_error_growth = 2;       // clusters: budget tin_max_error * G^level (0: none)
   std::string constraints;             // clusters: break lines (OGR file), or empty
   std::int32_t tile_cells = 128;       // grid: cells per tile side

@@ -40,37 +40,46 @@ double roundUpToMicrometre(double metres) {
 
 namespace {
 
-// levelNormals (tile_output.h) in doubles: summed and normalised in them.
+// levelNormals (tile_output.h) in doubles: summed and normalised in them. In parallel over
+// ranges of vertices, each range's task reading every triangle and summing the faces at its
+// own vertices, so every vertex sums its faces in triangle order whatever the thread count.
 std::vector<EcefPoint> unitNormals(const TinMesh& mesh, std::span<const EcefPoint> ecef) {
   const std::size_t n = mesh.vertices.size();
   std::vector<EcefPoint> normals(n, EcefPoint{});
   const auto& idx = mesh.triangle_indices;
-  for (std::size_t t = 0; t < idx.size(); t += 3) {
-    const EcefPoint& a = ecef[idx[t]];
-    const EcefPoint& b = ecef[idx[t + 1]];
-    const EcefPoint& c = ecef[idx[t + 2]];
-    const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
-    const double vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
-    const EcefPoint face{uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};  // area-weighted
-    for (std::size_t k = 0; k < 3; ++k) {
-      EcefPoint& nrm = normals[idx[t + k]];
-      nrm.x += face.x;
-      nrm.y += face.y;
-      nrm.z += face.z;
+  const auto ranges = static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
+    const std::size_t lo = n * r / ranges, hi = n * (r + 1) / ranges;
+    const auto mine = [&](std::uint32_t v) { return v >= lo && v < hi; };
+    for (std::size_t t = 0; t < idx.size(); t += 3) {
+      if (!mine(idx[t]) && !mine(idx[t + 1]) && !mine(idx[t + 2])) continue;
+      const EcefPoint& a = ecef[idx[t]];
+      const EcefPoint& b = ecef[idx[t + 1]];
+      const EcefPoint& c = ecef[idx[t + 2]];
+      const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+      const double vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
+      const EcefPoint face{uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};  // area-weighted
+      for (std::size_t k = 0; k < 3; ++k) {
+        if (!mine(idx[t + k])) continue;
+        EcefPoint& nrm = normals[idx[t + k]];
+        nrm.x += face.x;
+        nrm.y += face.y;
+        nrm.z += face.z;
+      }
     }
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    EcefPoint& nrm = normals[i];
-    double length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
-    if (length == 0) {  // an unused vertex: the direction from the Earth's centre
-      nrm = ecef[i];
-      length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
-      if (length == 0) nrm = {0, 0, 1}, length = 1;
+    for (std::size_t i = lo; i < hi; ++i) {
+      EcefPoint& nrm = normals[i];
+      double length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+      if (length == 0) {  // an unused vertex: the direction from the Earth's centre
+        nrm = ecef[i];
+        length = std::sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+        if (length == 0) nrm = {0, 0, 1}, length = 1;
+      }
+      nrm.x /= length;
+      nrm.y /= length;
+      nrm.z /= length;
     }
-    nrm.x /= length;
-    nrm.y /= length;
-    nrm.z /= length;
-  }
+  }, tbb::simple_partitioner());
   return normals;
 }
 

@@ -144,6 +144,9 @@ struct ClusterArrays {
     bool for_error = false;
   };
   std::vector<Refusal> refusals = std::vector<Refusal>(16384);
+  // The tail stop (SimplifyOptions::tail_stop): the try count at each of the last
+  // tail_stop.applied applied collapses, a ring by collapse number.
+  std::vector<std::uint64_t> tries_at_applied;
   std::vector<std::uint32_t> changed_at;  // per local vertex: the count of collapses applied when its quadric or place last changed (0: never)
 };
 
@@ -550,7 +553,18 @@ class ClusterCollapser {
       }
       enqueue(u);
     }
-    while (wantsMore() && !a_.heap.empty()) tryCollapse(popCheapest(), out);
+    tries_ = 0;
+    a_.tries_at_applied.assign(options_.tail_stop.on() ? options_.tail_stop.applied : 0, 0);
+    while (wantsMore() && !a_.heap.empty() && !stalled()) tryCollapse(popCheapest(), out);
+  }
+
+  // The tail stop: fewer than tail_stop.applied of the run's last tail_stop.tries tries were
+  // applied (while the run has applied fewer, its start counts as the missing ones).
+  bool stalled() const {
+    const std::size_t k = a_.tries_at_applied.size();
+    if (k == 0) return false;
+    const std::uint64_t kth_last = applied_ < k ? 0 : a_.tries_at_applied[(applied_ + 1) % k];
+    return tries_ - kth_last >= options_.tail_stop.tries;
   }
 
   // u starts as the filter left it in its part (ClusterSetup::refused_in_part): refused,
@@ -675,6 +689,7 @@ class ClusterCollapser {
 
   // Applies the collapse of u when the filter accepts it. Needs u's star gathered.
   bool accepts(std::uint32_t u, const Collapse& collapse, ClusterOutput& out) {
+    ++tries_;
     const std::uint32_t v = collapse.v;
     const std::uint32_t v_and_placement = vAndPlacement(collapse);
     ClusterArrays::Refusal& refusal = refusalOf(u, v_and_placement);
@@ -838,6 +853,7 @@ class ClusterCollapser {
     }
     a_.removed[u] = 1;
     a_.changed_at[v] = ++applied_;  // a new quadric, maybe a new place: its edges' optima change
+    if (!a_.tries_at_applied.empty()) a_.tries_at_applied[applied_ % a_.tries_at_applied.size()] = tries_;
     a_.absorbed_next[a_.absorbed_last[v]] = u;
     a_.absorbed_last[v] = a_.absorbed_last[u];
     edges_ -= 3;
@@ -854,6 +870,7 @@ class ClusterCollapser {
   ClusterArrays& a_;
   std::size_t edges_ = 0, initial_edges_ = 0, live_triangles_ = 0;
   std::uint32_t applied_ = 0;                  // collapses applied in this run
+  std::uint64_t tries_ = 0;                    // collapses tried in this run (accepts)
   mutable std::uint32_t failed_triangle_ = 0;  // see allNewTriangles
   double edge_ratio_ = 0.5;
   const ClusterSetup* setup_ = nullptr;

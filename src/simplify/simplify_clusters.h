@@ -93,6 +93,8 @@
 #include <cstdint>
 #include <limits>
 #include <span>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "src/dem/dem_grid.h"
@@ -107,6 +109,27 @@ enum class Simplifier {
   Native,  // terratiles' own edge collapse over flat arrays (the default, fast)
   Cgal,    // CGAL's Surface_mesh_simplification::edge_collapse per cluster (the reference)
 };
+
+// The tail stop: a cluster's run also stops when fewer than `applied` of its last `tries`
+// collapse tries were applied (tries = 0: off). Where the budget binds, a level's last few per
+// cent of collapses take about half of its tries (every change nearby makes each refused
+// vertex try again); the stop leaves those triangles in the level. The budget still holds for
+// every collapse applied; the result still does not depend on the number of threads.
+struct TailStop {
+  std::uint32_t tries = 0;
+  std::uint32_t applied = 0;
+  bool on() const { return tries > 0 && applied > 0; }
+};
+
+// The tools' default (`build`, `levels`; a library caller's SimplifyOptions and LevelOptions
+// default to off, the full greedy run): measured in tools/bench/README.md.
+inline constexpr TailStop kDefaultTailStop{1000, 5};
+
+// "off", or "TRIES,APPLIED" (as --tail-stop takes it).
+std::string tailStopName(const TailStop& stop);
+// Parses --tail-stop's value: "off" or "TRIES,APPLIED", 1 <= APPLIED <= TRIES, APPLIED <= 4096.
+// Throws Error(ErrorCode::Usage) naming the option otherwise.
+TailStop parseTailStop(std::string_view text);
 
 struct SimplifyOptions {
   Simplifier simplifier = Simplifier::Native;
@@ -126,6 +149,7 @@ struct SimplifyOptions {
   // nullptr: the budget is measured in the grid frame.
   const DemOnGlobe* globe = nullptr;
   std::span<const EcefPoint> vertex_ecef;
+  TailStop tail_stop;  // native engine only
 };
 
 struct ClusterSimplification {

@@ -61,6 +61,33 @@ const RealLevel& gothenburg() {
   return level;
 }
 
+// ETOPO5 at 5' from 100 E 30 N to 140 E 0 N (480 x 360 px) and its TIN at 10 m: trenches,
+// islands and seamounts, where a level's budget binds almost everywhere.
+const RealLevel& philippines() {
+  static const RealLevel level = [] {
+    const DemGrid etopo = readDem({test::sharedData("etopo5_global_4326.tif")});
+    RealLevel cut;
+    cut.dem = etopo;
+    cut.dem.width = 480;
+    cut.dem.height = 360;
+    cut.dem.origin_x = etopo.origin_x + 3360 * etopo.pixel_size_x;
+    cut.dem.origin_y = etopo.origin_y - 720 * etopo.pixel_size_y;
+    cut.dem.heights_m.resize(cut.dem.pixelCount());
+    for (int row = 0; row < cut.dem.height; ++row) {
+      for (int col = 0; col < cut.dem.width; ++col) {
+        cut.dem.heights_m[cut.dem.index(col, row)] = etopo.heightAt(3360 + col, 720 + row);
+      }
+    }
+    Progress progress;
+    cut.tin = buildTin(cut.dem, TinOptions{10.0}, progress);
+    const double metres_per_degree = 6378137.0 * M_PI / 180.0;
+    cut.metres_per_col = etopo.pixel_size_x * metres_per_degree * std::cos(15 * M_PI / 180.0);
+    cut.metres_per_row = etopo.pixel_size_y * metres_per_degree;
+    return cut;
+  }();
+  return level;
+}
+
 // Both engines keep every invariant below: the default and the quality reference.
 constexpr Simplifier kEngines[] = {Simplifier::Native, Simplifier::Cgal};
 
@@ -503,24 +530,7 @@ TEST_SUITE("simplify") {
     // ETOPO5 at 5' from 100 E 30 N to 140 E 0 N: trenches, islands and seamounts, where
     // optima a thousandth of a pixel off the lattice made slivers a few metres wide and
     // hundreds of metres high that the tiles' quantisation folded over.
-    const DemGrid etopo = readDem({test::sharedData("etopo5_global_4326.tif")});
-    RealLevel level;
-    level.dem = etopo;
-    level.dem.width = 480;
-    level.dem.height = 360;
-    level.dem.origin_x = etopo.origin_x + 3360 * etopo.pixel_size_x;
-    level.dem.origin_y = etopo.origin_y - 720 * etopo.pixel_size_y;
-    level.dem.heights_m.resize(level.dem.pixelCount());
-    for (int row = 0; row < level.dem.height; ++row) {
-      for (int col = 0; col < level.dem.width; ++col) {
-        level.dem.heights_m[level.dem.index(col, row)] = etopo.heightAt(3360 + col, 720 + row);
-      }
-    }
-    Progress progress;
-    level.tin = buildTin(level.dem, TinOptions{10.0}, progress);
-    const double metres_per_degree = 6378137.0 * M_PI / 180.0;
-    level.metres_per_col = etopo.pixel_size_x * metres_per_degree * std::cos(15 * M_PI / 180.0);
-    level.metres_per_row = etopo.pixel_size_y * metres_per_degree;
+    const RealLevel& level = philippines();
     const Partition partition = cellPartition(level.tin, level.dem, 60);
     const auto key = [](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
       std::array<std::uint32_t, 3> k{a, b, c};
@@ -575,6 +585,65 @@ TEST_SUITE("simplify") {
       CHECK(one.new_index_of_vertex == two.new_index_of_vertex);
       CHECK(one.refused_for_error == two.refused_for_error);
       CHECK(one.refused_for_flip == two.refused_for_flip);
+    }
+  }
+
+  TEST_CASE("the tail stop ends a run early, keeps the budget and cuts only the run's tail") {
+    // Where the budget binds (ETOPO5 round the Philippines, 40 m over a 10 m TIN), a run's
+    // last collapses take most of its tries: the stop leaves some of them out. It only ends
+    // the run: every collapse it applies is one the full run applies (so every vertex it
+    // removes, the full run removes too), and never sooner than the rule says.
+    const RealLevel& level = philippines();
+    const Partition partition = cellPartition(level.tin, level.dem, 60);
+    const SimplifyOptions full_options = optionsFor(Simplifier::Native, level, 40.0);
+    SimplifyOptions stop_options = full_options;
+    stop_options.tail_stop = parseTailStop("1000,5");
+    const ClusterSimplification full = simplify(level.dem, level.tin, partition, {}, full_options);
+    const ClusterSimplification stopped = simplify(level.dem, level.tin, partition, {}, stop_options);
+    MESSAGE("triangles: full run " << full.mesh.triangleCount() << ", tail stop 1000,5 " << stopped.mesh.triangleCount());
+    CHECK(stopped.mesh.triangleCount() > full.mesh.triangleCount());
+    CHECK(stopped.mesh.triangleCount() < full.mesh.triangleCount() * 21 / 20);
+    CHECK(stopped.refused_for_error < full.refused_for_error);
+    CHECK(measureTin(level.dem, stopped.mesh).max_error_m <= 40.0);
+    std::size_t removed_only_by_stopped_run = 0;
+    for (std::size_t v = 0; v < level.tin.vertices.size(); ++v) {
+      if (stopped.new_index_of_vertex[v] == kRemovedVertex && full.new_index_of_vertex[v] != kRemovedVertex) {
+        ++removed_only_by_stopped_run;
+      }
+    }
+    CHECK(removed_only_by_stopped_run == 0);
+    // A stop that cannot fire (a billion tries without a collapse) leaves the result as it is.
+    SimplifyOptions idle_options = full_options;
+    idle_options.tail_stop = parseTailStop("999999999,1");
+    const ClusterSimplification idle = simplify(level.dem, level.tin, partition, {}, idle_options);
+    CHECK(idle.mesh.triangle_indices == full.mesh.triangle_indices);
+    CHECK(std::equal(idle.mesh.vertices.begin(), idle.mesh.vertices.end(), full.mesh.vertices.begin(),
+                     full.mesh.vertices.end(), sameBits));
+    // As every run: the same with one and two threads.
+    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    const ClusterSimplification serial = simplify(level.dem, level.tin, partition, {}, stop_options);
+    CHECK(serial.mesh.triangle_indices == stopped.mesh.triangle_indices);
+    CHECK(std::equal(serial.mesh.vertices.begin(), serial.mesh.vertices.end(), stopped.mesh.vertices.begin(),
+                     stopped.mesh.vertices.end(), sameBits));
+  }
+
+  TEST_CASE("the tail stop is off or TRIES,APPLIED and anything else is refused") {
+    CHECK_FALSE(parseTailStop("off").on());
+    const TailStop stop = parseTailStop("1000,5");
+    CHECK(stop.tries == 1000);
+    CHECK(stop.applied == 5);
+    CHECK(tailStopName(stop) == "1000,5");
+    CHECK(tailStopName(TailStop{}) == "off");
+    for (const char* bad : {"", "on", "1000", "1000,", ",5", "5,1000", "0,0", "1000,0", "-1000,5", "1000,5,1", "10 00,5",
+                            "1e3,5", "9000,5000", "99999999999,5"}) {
+      CAPTURE(bad);
+      try {
+        parseTailStop(bad);
+        FAIL("accepted");
+      } catch (const Error& error) {
+        CHECK(error.code() == ErrorCode::Usage);
+        CHECK(std::string(error.what()).find("--tail-stop") != std::string::npos);
+      }
     }
   }
 

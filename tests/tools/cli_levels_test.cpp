@@ -52,6 +52,10 @@ TEST_SUITE("cli") {
     CHECK(test::runTerratiles({"levels", input, "-o", output, "-f", "-q", "--levels", "2"}).exit_code == 0);
     CHECK(test::runTerratiles({"levels", input, "-o", dir / "x", "--level-ratio", "1.5"}).exit_code == 2);
     CHECK(test::runTerratiles({"levels", input, "-o", dir / "y", "--partitioner", "kway"}).exit_code == 2);
+    const auto bad_stop = test::runTerratiles({"levels", input, "-o", dir / "z", "--tail-stop", "5,1000"});
+    CHECK(bad_stop.exit_code == 2);
+    CHECK(bad_stop.err.find("--tail-stop is '5,1000'") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.path() / "z"));
     CHECK_FALSE(std::filesystem::exists(dir.path() / "x"));
   }
 
