@@ -7,7 +7,7 @@
 //
 // Simplifier::Native (the default, `--simplifier native`: 1.5-3x faster than CGAL on SRTM; on
 // ETOPO5, where the budget refuses about ten collapses for each it accepts, the whole build
-// 3.6x Delatin; tools/bench/README.md has the history): terratiles'
+// 2.7x Delatin with the tools' default tail stop; tools/bench/README.md has the history): terratiles'
 // own edge collapse over flat arrays. A vertex is free when
 // none of its edges is locked (a locked edge is on the dataset's outer border, between two
 // clusters or a constraint), so a free vertex's star is closed and inside its cluster. A
