@@ -287,6 +287,21 @@ inline DelatinOutput readDelatinOutput(const std::filesystem::path& path) {
   return output;
 }
 
+// Fails fast, before any timed run, when `script` (run_delatin.mjs) exists but Node would not
+// find the delatin package from it: no node_modules/delatin in its folder or any folder
+// above (Node's own lookup). Throws Error(Usage) naming the fix.
+inline void requireDelatinPackage(const std::string& script) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  for (fs::path folder = fs::absolute(script, ec).parent_path(); !folder.empty(); folder = folder.parent_path()) {
+    if (fs::exists(folder / "node_modules" / "delatin" / "package.json", ec)) return;
+    if (folder == folder.root_path()) break;
+  }
+  throw Error(ErrorCode::Usage, "--script: " + script +
+                                    " cannot find the delatin package (no node_modules/delatin beside it or "
+                                    "above); run npm ci in tools/bench/delatin");
+}
+
 // Runs `node script RAW WIDTH HEIGHT MAX_ERROR 1 OUT` (one untimed warm-up build inside node,
 // then one timed: see run_delatin.mjs) on the raw grid `raw` (writeRawGrid; no NaN) and
 // returns what it wrote to `out`. Throws Error(Usage) when node cannot be started,

@@ -121,6 +121,7 @@ BenchOptions parseOptions(int argc, char** argv) {
     throw Error(ErrorCode::Usage, "--script: " + options.script +
                                       " does not exist; pass the path of tools/bench/delatin/run_delatin.mjs");
   }
+  bench::requireDelatinPackage(options.script);
   return options;
 }
 
