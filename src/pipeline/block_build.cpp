@@ -1019,7 +1019,7 @@ nlohmann::json blockManifest(const BuildOptions& options, std::int32_t block_pix
   m["join_tile_clusters"] = options.join_tile_clusters;
   m["global_partition"] = options.global_partition;
   m["level_ratio"] = options.level_ratio;
-  m["simplifier"] = options.simplifier == Simplifier::Cgal ? "cgal" : "native";
+  m["simplifier"] = simplifierName(options.simplifier);
   m["tail_stop"] = tailStopName(options.tail_stop);
   m["level_error_growth"] = options.level_error_growth;
   m["heights"] = options.heights == HeightReference::Orthometric ? "orthometric" : "ellipsoidal";

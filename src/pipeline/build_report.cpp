@@ -31,7 +31,7 @@ json optionsJson(const BuildOptions& o) {
   j["clusters_per_tile"] = o.clusters_per_tile;
   j["join_tile_clusters"] = o.join_tile_clusters;
   j["level_ratio"] = o.level_ratio;
-  j["simplifier"] = o.simplifier == Simplifier::Cgal ? "cgal" : "native";
+  j["simplifier"] = simplifierName(o.simplifier);
   j["tail_stop"] = tailStopName(o.tail_stop);
   j["level_error_growth"] = o.level_error_growth;
   j["constraints"] = o.constraints.empty() ? std::string("none") : fs::absolute(o.constraints).string();

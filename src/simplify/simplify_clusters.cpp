@@ -4,6 +4,7 @@
 #include "src/simplify/simplify_clusters.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -21,24 +22,19 @@ std::string tailStopName(const TailStop& stop) {
 
 TailStop parseTailStop(std::string_view text) {
   if (text == "off") return {};
-  const auto wholeNumber = [](std::string_view digits, std::uint64_t& value) {
-    if (digits.empty() || digits.size() > 9) return false;
-    value = 0;
-    for (const char c : digits) {
-      if (c < '0' || c > '9') return false;
-      value = 10 * value + static_cast<std::uint64_t>(c - '0');
-    }
-    return true;
+  const auto wholeNumber = [](std::string_view digits, std::uint32_t& value) {
+    const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    return !digits.empty() && error == std::errc() && end == digits.data() + digits.size();
   };
   const std::size_t comma = text.find(',');
-  std::uint64_t tries = 0, applied = 0;
+  std::uint32_t tries = 0, applied = 0;
   if (comma == std::string_view::npos || !wholeNumber(text.substr(0, comma), tries) ||
       !wholeNumber(text.substr(comma + 1), applied) || applied < 1 || applied > tries || applied > 4096) {
     throw Error(ErrorCode::Usage, "--tail-stop is '" + std::string(text) +
                                       "'; expected off or TRIES,APPLIED (whole numbers, 1 <= APPLIED <= TRIES, "
                                       "APPLIED <= 4096), for example 1000,5");
   }
-  return {static_cast<std::uint32_t>(tries), static_cast<std::uint32_t>(applied)};
+  return {tries, applied};
 }
 namespace cluster_collapse {
 namespace {

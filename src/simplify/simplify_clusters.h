@@ -110,6 +110,9 @@ enum class Simplifier {
   Cgal,    // CGAL's Surface_mesh_simplification::edge_collapse per cluster (the reference)
 };
 
+// "native" or "cgal", as --simplifier takes it.
+inline const char* simplifierName(Simplifier simplifier) { return simplifier == Simplifier::Cgal ? "cgal" : "native"; }
+
 // The tail stop: a cluster's run also stops when fewer than `applied` of its last `tries`
 // collapse tries were applied (tries = 0: off). Where the budget binds, a level's last few per
 // cent of collapses take about half of its tries (every change nearby makes each refused

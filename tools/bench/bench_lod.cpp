@@ -310,7 +310,7 @@ RasterSummary benchRaster(const std::string& path, const BenchOptions& options) 
               finest_error.max_error_m, finest_error.rms_error_m);
   std::printf("one thread; terratiles' %s engine; METIS %s; per step 1 warm-up + %d timed runs, medians; both "
               "tools simplify the same mesh (terratiles' previous level) with the same clusters to %g\n",
-              options.simplifier == Simplifier::Cgal ? "cgal" : "native",
+              simplifierName(options.simplifier),
               options.region_clusters > 0
                   ? ("per grid cell of about " + std::to_string(options.region_clusters) + " clusters").c_str()
                   : "one call per level",
