@@ -154,11 +154,7 @@ BenchOptions parseOptions(int argc, char** argv) {
     throw Error(ErrorCode::Usage, "--terratiles: " + options.terratiles +
                                       " is not an executable; build the terratiles target or pass --terratiles PATH");
   }
-  if (!fs::exists(options.script)) {
-    throw Error(ErrorCode::Usage, "--script: " + options.script +
-                                      " does not exist; pass the path of tools/bench/delatin/run_delatin.mjs");
-  }
-  bench::requireDelatinPackage(options.script);
+  bench::requireDelatinScript(options.script);
   return options;
 }
 

@@ -287,12 +287,16 @@ inline DelatinOutput readDelatinOutput(const std::filesystem::path& path) {
   return output;
 }
 
-// Fails fast, before any timed run, when `script` (run_delatin.mjs) exists but Node would not
-// find the delatin package from it: no node_modules/delatin in its folder or any folder
-// above (Node's own lookup). Throws Error(Usage) naming the fix.
-inline void requireDelatinPackage(const std::string& script) {
+// Fails fast, before any timed run, when `script` (run_delatin.mjs) does not exist or Node
+// would not find the delatin package from it: no node_modules/delatin in its folder or any
+// folder above (Node's own lookup). Throws Error(Usage) naming the fix.
+inline void requireDelatinScript(const std::string& script) {
   namespace fs = std::filesystem;
   std::error_code ec;
+  if (!fs::exists(script, ec)) {
+    throw Error(ErrorCode::Usage,
+                "--script: " + script + " does not exist; pass the path of tools/bench/delatin/run_delatin.mjs");
+  }
   for (fs::path folder = fs::absolute(script, ec).parent_path(); !folder.empty(); folder = folder.parent_path()) {
     if (fs::exists(folder / "node_modules" / "delatin" / "package.json", ec)) return;
     if (folder == folder.root_path()) break;

@@ -117,11 +117,7 @@ BenchOptions parseOptions(int argc, char** argv) {
     }
   }
   if (options.rasters.empty()) throw Error(ErrorCode::Usage, std::string("no RASTER given\n") + kUsage);
-  if (!fs::exists(options.script)) {
-    throw Error(ErrorCode::Usage, "--script: " + options.script +
-                                      " does not exist; pass the path of tools/bench/delatin/run_delatin.mjs");
-  }
-  bench::requireDelatinPackage(options.script);
+  bench::requireDelatinScript(options.script);
   return options;
 }
 

@@ -297,7 +297,8 @@ void addHeightOptions(CLI::App& command, std::string& heights, std::string& geoi
 constexpr const char* kSimplifierHelp =
     "Edge-collapse engine inside the clusters: native (terratiles' own over flat arrays with CGAL's quadrics, "
     "filter and greedy order; the default: 1.5-3x faster on SRTM, per-zoom geometricError within +3.2 % of "
-    "CGAL's on the test rasters but SRTM N57E011's coarsest zoom, +7 %, within what the partition alone moves it) or cgal (CGAL's Surface_mesh_simplification: the quality reference)";
+    "CGAL's on the test rasters but SRTM N57E011's coarsest zoom, +7 %, within what the partition alone moves "
+    "it) or cgal (CGAL's Surface_mesh_simplification: the quality reference)";
 
 void addSimplifierOption(CLI::App& command, std::string& simplifier) {
   command.add_option("--simplifier", simplifier, kSimplifierHelp)
