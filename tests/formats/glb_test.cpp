@@ -1,11 +1,21 @@
 #include <doctest/doctest.h>
 
+#include <dlfcn.h>
+
 #include <cmath>
+#include <cstdint>
 #include <set>
 
+#include "formats/dem/read_dem.h"
 #include "formats/gltf/read_glb.h"
 #include "formats/gltf/write_glb.h"
 #include "src/base/error.h"
+#include "tests/test_support.h"
+
+namespace draco {
+std::int64_t ComputeShannonEntropy(const std::uint32_t* symbols, int num_symbols, int max_value,
+                                   int* out_num_unique_symbols);
+}
 
 using namespace terratiles;
 
@@ -132,6 +142,53 @@ TEST_SUITE("formats") {
       found |= std::fabs(decoded.mesh.positions[3 * v] - 50000.0f) <= encoded.position_step_m / 2;
     }
     CHECK(found);
+  }
+
+  TEST_CASE("the symbol entropy estimate write_glb gives Draco is the library's own, without its table") {
+    // write_glb.cpp defines draco::ComputeShannonEntropy in the executable, which the dynamic
+    // linker binds libdraco's calls to; the library's definition is the next one.
+    using Entropy = std::int64_t (*)(const std::uint32_t*, int, int, int*);
+    const auto library = reinterpret_cast<Entropy>(dlsym(RTLD_NEXT, "_ZN5draco21ComputeShannonEntropyEPKjiiPi"));
+    const bool found = library != nullptr;
+    REQUIRE(found);
+    const auto ours = reinterpret_cast<Entropy>(dlsym(RTLD_DEFAULT, "_ZN5draco21ComputeShannonEntropyEPKjiiPi"));
+    const Entropy defined = &draco::ComputeShannonEntropy;
+    const bool exported = ours == defined;  // libdraco's calls come here
+    REQUIRE(exported);
+    const bool distinct = ours != library;
+    REQUIRE(distinct);
+    // Symbols as Draco makes them of positions at 1/128 m (zigzag of the difference to the
+    // previous value, the first from zero), from rows of a real raster's heights: a large
+    // first symbol then small ones (the table the library counts them in is long, ours is
+    // not), and small symbols alone (both count them in a table).
+    const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
+    const auto zigzag = [](std::int64_t v) { return static_cast<std::uint32_t>(v < 0 ? -2 * v - 1 : 2 * v); };
+    int checked = 0;
+    for (const int rows : {1, 7, 40}) {
+      for (const bool from_zero : {true, false}) {
+        std::vector<std::uint32_t> symbols;
+        std::int64_t previous = 0;
+        for (int row = 0; row < rows; ++row) {
+          for (int col = 0; col < dem.width; ++col) {
+            const float h = dem.heightAt(col, 300 + row);
+            if (std::isnan(h)) continue;
+            const std::int64_t q = std::llround((h + 1000.0) * 128.0);
+            if (symbols.empty() && !from_zero) previous = q;
+            symbols.push_back(zigzag(q - previous));
+            previous = q;
+          }
+        }
+        const int max_value = static_cast<int>(*std::max_element(symbols.begin(), symbols.end()));
+        CHECK(max_value > 0);
+        int unique_ours = -1, unique_library = -2;
+        CHECK(ours(symbols.data(), static_cast<int>(symbols.size()), max_value, &unique_ours) ==
+              library(symbols.data(), static_cast<int>(symbols.size()), max_value, &unique_library));
+        CHECK(unique_ours == unique_library);
+        CHECK(unique_ours > 10);
+        ++checked;
+      }
+    }
+    CHECK(checked == 6);
   }
 
   TEST_CASE("a plain GLB keeps positions and indices exactly") {
