@@ -121,7 +121,7 @@ TEST_SUITE("cli") {
     test::CliResult result;
     result.err.assign(std::istreambuf_iterator<char>(err_in), std::istreambuf_iterator<char>());
     CHECK(WEXITSTATUS(status) == 6);
-    checkOneLineError(result, "out of memory; a build needs about 140 bytes per input pixel");
+    checkOneLineError(result, "out of memory; a build needs about 120 bytes per input pixel");
     CHECK_FALSE(fs::exists(out));
     std::size_t entries = 0;  // no staging directory either
     for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir.path())) ++entries;

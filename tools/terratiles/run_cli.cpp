@@ -49,10 +49,10 @@ constexpr const char* kExitCodes =
     "Exit codes: 0 ok, 1 internal error, 2 usage, 3 bad input, 4 output not writable, "
     "6 out of memory, 130 interrupted (check: 5 a violation).";
 
-// What a build needs (tools/bench/README.md: 137-138 bytes per pixel on Gabon and ETOPO5,
-// more on small rasters, where about 65 MB are fixed).
+// What a build needs (tools/bench/README.md: 118-119 bytes per pixel on Gabon, ETOPO5 and
+// SRTM N57E011; small rasters are fixed cost, 83-96 MB, of which about 40 MB is the process).
 constexpr const char* kOutOfMemory =
-    "out of memory; a build needs about 140 bytes per input pixel at its peak (plus about 65 MB): split the input "
+    "out of memory; a build needs about 120 bytes per input pixel at its peak (at least about 90 MB): split the input "
     "into smaller rasters (gdal_translate -srcwin) or raise --tin-max-error; with --lod grid, lower --tile-cells";
 
 extern "C" void onInterrupt(int) { Progress::requestCancel(); }
