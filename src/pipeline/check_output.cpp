@@ -363,12 +363,13 @@ struct Strip {
 // vertices whose pixel row is the strip's are recorded in the tile (tile.vertex_grid,
 // off_lattice). Leaves the covered pixels of the strip's own rows in s.covered (indices from
 // the strip's first row, each once). Needs the finer zoom's surface of the window complete.
+// `decoded`: the tile is in `s` already (describeTile has just decoded it).
 void measureInStrip(const fs::path& dir, const DemGrid& frame, const GeoidGrid* geoid, ToDemCrs& to_dem,
                     const Strip& strip, const ZoomSurface* finer, ZoomSurface& surface, CheckTile& tile,
-                    DecodeScratch& s) {
+                    DecodeScratch& s, bool decoded) {
   const DemOnGlobe& globe = strip.globe;
   const DemGrid& dem = globe.dem();  // the window
-  decodeTile(dir, frame, globe.wrapsLongitude(), geoid, to_dem, tile.uri, s);
+  if (!decoded) decodeTile(dir, frame, globe.wrapsLongitude(), geoid, to_dem, tile.uri, s);
   const std::size_t n = s.grid.size();
   const double shift = static_cast<double>(strip.window_row);
   s.window_grid.resize(n);
@@ -739,15 +740,22 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     }
   }
   tbb::enumerable_thread_specific<DecodeScratch> scratch;
-  progress.beginStage("decoding tiles", report.tiles);
-  for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
-    const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
-    forEachLargestFirst(here, [&](std::size_t i) {
-      describeTile(dir, frame, wraps_longitude, geoid_grid, to_dem, tiles[i], scratch.local());
-    });
-    progress.advance(here.size());
+  // A raster whose pixels the strip budget holds is one strip, its window the whole raster
+  // whatever the tallest triangle: every tile is then decoded once, described and measured
+  // from the same decoding. Else every tile is described first (its rows, and the tallest
+  // triangle's, size the strips' windows) and decoded again in every strip it meets.
+  const bool one_strip = static_cast<std::int64_t>(width) * height <= options.strip_pixels;
+  if (!one_strip) {
+    progress.beginStage("decoding tiles", report.tiles);
+    for (std::int32_t zoom = max_zoom; zoom >= min_zoom; --zoom) {
+      const std::vector<std::size_t>& here = at_zoom[static_cast<std::size_t>(zoom)];
+      forEachLargestFirst(here, [&](std::size_t i) {
+        describeTile(dir, frame, wraps_longitude, geoid_grid, to_dem, tiles[i], scratch.local());
+      });
+      progress.advance(here.size());
+    }
+    progress.endStage();
   }
-  progress.endStage();
 
   // The strips, as writeZoomsInStrips makes them for the build: each strip of rows read with
   // every row a triangle meeting it spans (the tallest triangle's rows above and below, and
@@ -757,14 +765,19 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   // per pixel of the strip its coverage (5 bytes), whatever the raster's size.
   std::int64_t tallest = 0;
   for (const CheckTile& tile : tiles) tallest = std::max(tallest, tile.tallest_rows);
-  const std::int64_t reach = tallest + 2;
-  const std::int64_t strip_rows = std::max<std::int64_t>(16, options.strip_pixels / std::max(width, 1) - 2 * reach);
+  const std::int64_t reach = one_strip ? height : tallest + 2;
+  const std::int64_t strip_rows =
+      one_strip ? height : std::max<std::int64_t>(16, options.strip_pixels / std::max(width, 1) - 2 * reach);
   // The coverage classes of every strip, one after the other (class 0, the empty set, shared).
   CoverageClasses classes;
   std::size_t valid_pixels = 0;
   std::optional<std::array<std::int32_t, 2>> first_left_out;
   std::mutex classes_mutex;
-  progress.beginStage("measuring tiles strip by strip", static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
+  if (one_strip) {
+    progress.beginStage("decoding and measuring tiles", report.tiles);
+  } else {
+    progress.beginStage("measuring tiles strip by strip", static_cast<std::uint64_t>((height + strip_rows - 1) / strip_rows));
+  }
   for (std::int64_t r0 = 0; r0 < height; r0 += strip_rows) {
     const std::int64_t r1 = std::min<std::int64_t>(height, r0 + strip_rows);
     const std::int64_t w0 = std::max<std::int64_t>(0, r0 - reach), w1 = std::min<std::int64_t>(height, r1 + reach);
@@ -789,12 +802,16 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
       if (k > 0) surface.clear();
       std::vector<std::size_t> here;
       for (const std::size_t i : at_zoom[static_cast<std::size_t>(zoom)]) {
-        if (inWindow(tiles[i].rows)) here.push_back(i);
+        if (one_strip || inWindow(tiles[i].rows)) here.push_back(i);
       }
       forEachLargestFirst(here, [&](std::size_t i) {
         CheckTile& tile = tiles[i];
         DecodeScratch& s = scratch.local();
-        measureInStrip(dir, frame, geoid_grid, to_dem, strip, finer, surface, tile, s);
+        if (one_strip) {
+          describeTile(dir, frame, wraps_longitude, geoid_grid, to_dem, tile, s);
+          if (!inWindow(tile.rows)) return;
+        }
+        measureInStrip(dir, frame, geoid_grid, to_dem, strip, finer, surface, tile, s, one_strip);
         // Into the classes in the order tiles finish: the classes differ in their numbering
         // only, every count made from them is the same.
         const std::lock_guard<std::mutex> lock(classes_mutex);
@@ -803,6 +820,7 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
         }
         strip_classes.add(i, s.covered);
       });
+      if (one_strip) progress.advance(at_zoom[static_cast<std::size_t>(zoom)].size());
     }
     // ---- 1. coverage of the strip's rows by the finest zoom ----
     for (std::int64_t row = r0; row < r1; ++row) {
@@ -831,7 +849,7 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
     }
     strip_classes.countFootprint(footprint);
     classes.append(strip_classes);
-    progress.advance();
+    if (!one_strip) progress.advance();
   }
   progress.endStage();
   if (valid_pixels == 0) {

@@ -42,7 +42,8 @@
 // the largest over the strips, and its outline vertices are put back on their pixel centres
 // in the strip of their row. So a report is the same for any strip size, and memory is one
 // window and the tiles' outlines, whatever the raster's size. The time grows with the strips'
-// count (a tile is decoded in each strip it meets).
+// count (a tile is decoded in each strip it meets). A raster the strip budget holds whole is
+// one strip, its window the raster: each tile is decoded once there, for both.
 
 #include <cstddef>
 #include <cstdint>
