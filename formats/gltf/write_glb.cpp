@@ -19,8 +19,9 @@
 // coding them tagged (symbol_encoding.cc), and counts the symbols for the raw estimate with
 // draco::ComputeShannonEntropy in a table as long as their largest value. A tile's first
 // vertex is coded as its offset from the tile's least coordinates, so that is 4 bytes per
-// quantisation step of the tile's extent: 6-24 MB per tile of SRTM N57E011 at 1/128 m, on each encoding thread, more
-// than the rest of the tile's encoding, and what glibc kept of it set the build's peak.
+// quantisation step of the tile's extent: 6-24 MB per tile of SRTM N57E011 at 1/128 m, on
+// each encoding thread, more than the rest of the tile's encoding, and what glibc kept of it
+// set the build's peak.
 // This definition takes the library's place (the executable's exported function interposes
 // libdraco's, as the dynamic linker does for any default-visibility function) and returns
 // the same numbers: the same sum, term by term in ascending symbol order, of counts taken

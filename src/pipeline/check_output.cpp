@@ -763,11 +763,14 @@ CheckReport checkOutput(const std::string& output_dir, const CheckOptions& optio
   // window drawn over it. Memory: the window's heights, points on the globe and two zooms'
   // surfaces (33 bytes per pixel for a WGS84 longitude and latitude DEM, 73 for another), and
   // per pixel of the strip its coverage (5 bytes), whatever the raster's size.
-  std::int64_t tallest = 0;
-  for (const CheckTile& tile : tiles) tallest = std::max(tallest, tile.tallest_rows);
-  const std::int64_t reach = one_strip ? height : tallest + 2;
-  const std::int64_t strip_rows =
-      one_strip ? height : std::max<std::int64_t>(16, options.strip_pixels / std::max(width, 1) - 2 * reach);
+  // (One strip: its rows and window are the raster's, the tiles not yet described.)
+  std::int64_t reach = height, strip_rows = height;
+  if (!one_strip) {
+    std::int64_t tallest = 0;
+    for (const CheckTile& tile : tiles) tallest = std::max(tallest, tile.tallest_rows);
+    reach = tallest + 2;
+    strip_rows = std::max<std::int64_t>(16, options.strip_pixels / std::max(width, 1) - 2 * reach);
+  }
   // The coverage classes of every strip, one after the other (class 0, the empty set, shared).
   CoverageClasses classes;
   std::size_t valid_pixels = 0;
