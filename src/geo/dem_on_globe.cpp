@@ -77,6 +77,12 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
     factors.rows.resize(static_cast<std::size_t>(dem.height));
     factors.height.assign(pixels + kDemOnGlobePadding, 0.0);
   }
+  // Columns at most 360 degrees apart, no two of them on one meridian (a seam column
+  // repeated is half a column or less from the first).
+  if (transforms_->local().isWgs84LonLat() && dem.width > 0 &&
+      (static_cast<double>(dem.width) - 0.5) * dem.pixel_size_x < 360.0) {
+    degrees_per_column_ = dem.pixel_size_x;
+  }
   std::atomic<bool> factors_hold = true;
   const auto placeRows = [&](const tbb::blocked_range<std::int32_t>& rows, bool with_factors) {
     const std::size_t first = dem.index(0, rows.begin());

@@ -126,6 +126,10 @@ class DemOnGlobe {
   double maxSinLatitude(std::int32_t row) const { return max_sin_latitude_[static_cast<std::size_t>(row)]; }
   // Whether the DEM spans the whole circle of longitude (its last column is next to its first).
   bool wrapsLongitude() const { return wraps_longitude_; }
+  // On a DEM in WGS84 longitude and latitude (no two columns on one meridian): degrees of
+  // longitude per column (a pixel's longitude is its column's, and so is that of every grid
+  // point placed in that column, at any row and height); 0 on any other DEM.
+  double degreesPerColumn() const { return degrees_per_column_; }
   // Without factors(): the same as arrays (structure of arrays, for vectorised scans;
   // pixelLanes in dem_on_globe_lanes.h reads either form).
   const double* pointX() const { return stored(x_); }
@@ -164,6 +168,7 @@ class DemOnGlobe {
   std::vector<std::uint8_t> pole_rows_;
   std::vector<double> column_spacing_m_, row_spacing_m_, max_sin_latitude_;
   bool wraps_longitude_ = false;
+  double degrees_per_column_ = 0;
   bool has_pole_rows_ = false;
 };
 

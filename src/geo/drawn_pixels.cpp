@@ -17,6 +17,7 @@ struct GlobeRows {
   double maxSinLatitude(std::int32_t row) const { return globe.maxSinLatitude(row); }
   bool poleRow(std::int32_t row) const { return globe.poleRow(row); }
   bool wrapsLongitude() const { return globe.wrapsLongitude(); }
+  double degreesPerColumn() const { return globe.degreesPerColumn(); }
   double slack() const { return 1; }
 };
 
@@ -30,6 +31,7 @@ struct CollectedRows {
   double maxSinLatitude(std::int32_t row) const { return rows.max_sin_latitude[static_cast<std::size_t>(row)]; }
   bool poleRow(std::int32_t row) const { return rows.pole[static_cast<std::size_t>(row)] != 0; }
   bool wrapsLongitude() const { return rows.wraps_longitude; }
+  double degreesPerColumn() const { return std::max(0.0, rows.degrees_per_column); }
   double slack() const { return rows.slack; }
 };
 
@@ -40,10 +42,12 @@ PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& co
     std::int32_t width, height;
   } dem{globe.width(), globe.height()};
   constexpr double kRadius_m = 6.3e6;  // below every WGS84 radius of curvature
-  double row_min = 1e300, row_max = -1e300;
+  double row_min = 1e300, row_max = -1e300, col_min = 1e300, col_max = -1e300;
   for (const GridCorner& corner : corners) {
     row_min = std::min(row_min, corner.row);
     row_max = std::max(row_max, corner.row);
+    col_min = std::min(col_min, corner.col);
+    col_max = std::max(col_max, corner.col);
   }
   // Over the rows the footprint can span: the smallest spacings, and the largest |sin lat| of
   // their verticals (a pole row has none: a corner there has no column to stray by), which
@@ -52,9 +56,11 @@ PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& co
   const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
   double row_spacing = std::numeric_limits<double>::infinity(), column_spacing = row_spacing;
   double sin_lat = 0;
+  bool pole_row = false;
   for (std::int32_t row = first_row; row <= last_row; ++row) {
     if (row < dem.height - 1) row_spacing = std::min(row_spacing, globe.rowSpacing(row));
     if (!globe.poleRow(row)) column_spacing = std::min(column_spacing, globe.columnSpacing(row));
+    else pole_row = true;
     sin_lat = std::max(sin_lat, globe.maxSinLatitude(row));
   }
   const double tan_lat = std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
@@ -65,6 +71,12 @@ PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& co
   margin.columns = column_spacing > 0 && std::isfinite(column_spacing) ? margin_m / column_spacing
                                                                        : static_cast<double>(dem.width);
   if (!std::isfinite(margin.rows)) margin.rows = 0;  // a single row
+  const double degrees = globe.degreesPerColumn();
+  if (degrees > 0 && !pole_row && column_spacing > 0 && std::isfinite(column_spacing) &&
+      (col_max - col_min) * degrees <= 90) {
+    const double shift_columns = 2 * shift_m * globe.slack() / column_spacing;
+    if (shift_columns * degrees < 45) margin.longitude_columns = shift_columns;
+  }
   return margin;
 }
 
@@ -89,7 +101,7 @@ PixelBox candidatePixelsOf(const Rows& globe, const std::array<GridCorner, 3>& c
   PixelBox box;
   if (!(col_min <= col_max) || !(row_min <= row_max)) return box;  // no corner with a column: nothing
   const PixelMargin margin = strayMarginOf(globe, corners, longest_edge_m, shift_m);
-  const double margin_rows = margin.rows, margin_cols = margin.columns;
+  const double margin_rows = margin.rows, margin_cols = margin.boxColumns();
   box.row0 = static_cast<std::int32_t>(std::max(0.0, std::ceil(row_min - margin_rows - 1e-9)));
   box.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, std::floor(row_max + margin_rows + 1e-9)));
   if (at_pole) {
@@ -135,6 +147,8 @@ void LatticeRows::collect(const DemOnGlobe& window, std::int64_t first_row) {
   const DemGrid& dem = window.dem();
   if (pole.empty()) return;
   wraps_longitude = window.wrapsLongitude();
+  if (degrees_per_column < 0) degrees_per_column = window.degreesPerColumn();
+  else if (degrees_per_column != window.degreesPerColumn()) degrees_per_column = 0;
   if (first_row != 0 || static_cast<std::size_t>(dem.height) != pole.size()) slack = kSlack;
   for (std::int32_t r = 0; r < dem.height; ++r) {
     const std::int64_t row = first_row + r;

@@ -15,6 +15,7 @@
 // their columns the short way round. Columns of a DEM that spans 360 degrees of longitude
 // wrap.
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -45,9 +46,25 @@ PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3
 
 // How far (in columns and rows) a drawn triangle's footprint may stray from its triangle in
 // the grid: the bulge and shift above, over the smallest pixel spacing of the rows it spans.
+//
+// On a DEM whose columns are WGS84 longitudes (DemOnGlobe::degreesPerColumn) the columns of
+// the pixels a drawn triangle meets are bounded more tightly, near a pole by far: a pixel's
+// vertical (the ellipsoid's normal) lies in its meridian plane, so it meets the triangle at a
+// point of the pixel's longitude, and the longitudes of a plane triangle's points lie between
+// its corners' when these span less than half a turn and none is on the axis (the triangle's
+// shadow on the equator plane is a triangle, and a straight line's direction from the axis
+// turns one way). So only the shift moves them past the corners' columns: by at most
+// asin(shift / rho) of longitude at a distance rho from the axis, less than 2 shift over the
+// smallest column spacing of the rows the corners lie between (a spacing is at most rho
+// times the column's angle; rho varies with height by 0.3 % at most). `longitude_columns` is
+// that where the corners span at most 90 degrees, no pole row is among their rows (and the
+// rows next to them) and the bound is below 45 degrees, else infinity. The box's columns
+// grow by boxColumns(); a stray pixel is still within `columns` and `rows` of the triangle.
 struct PixelMargin {
   double columns = 0;
   double rows = 0;
+  double longitude_columns = std::numeric_limits<double>::infinity();
+  double boxColumns() const { return std::min(columns, longitude_columns); }
 };
 PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
                         double shift_m);
@@ -69,6 +86,8 @@ struct LatticeRows {
   std::vector<double> row_spacing_m, column_spacing_m, max_sin_latitude;
   std::vector<std::uint8_t> pole;
   bool wraps_longitude = false;
+  // DemOnGlobe::degreesPerColumn when every strip collected has the same, else 0.
+  double degrees_per_column = -1;  // -1: nothing collected yet
 
   LatticeRows(std::int32_t columns, std::int64_t rows)
       : width(columns),

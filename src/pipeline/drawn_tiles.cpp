@@ -288,15 +288,27 @@ PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longes
   if (!(least_rows >= 0 && least_columns >= 0 && most_rows < 1e9 && most_columns < 1e9)) {
     return candidatePixels(globe_, corners, longest_edge_m, shift_m);
   }
+  // strayMargin's longitude_columns (no pole row here): the box grows by the smaller margin.
+  double least_box_columns = least_columns, most_box_columns = most_columns;
+  const double degrees = globe_.degreesPerColumn();
+  if (degrees > 0 && (col_max - col_min) * degrees <= 90) {
+    const double least_shift = 2 * shift_m / column_high, most_shift = 2 * shift_m / column_low;
+    const bool least_bounds = least_shift * degrees < 45, most_bounds = most_shift * degrees < 45;
+    if (least_bounds != most_bounds) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
+    if (least_bounds) {
+      least_box_columns = std::min(least_columns, least_shift);
+      most_box_columns = std::min(most_columns, most_shift);
+    }
+  }
   // candidatePixels's box (no corner at a pole) for both margins: an edge is the same for
   // both when the value rounded for the smaller margin rounds (up or down) to the value
   // rounded for the larger one (every value between then rounds there too).
   const double row_first_most = std::ceil(row_min - most_rows - 1e-9);
   const double row_last_most = std::floor(row_max + most_rows + 1e-9);
-  const double col_first_most = std::ceil(col_min - most_columns - 1e-9);
-  const double col_last_most = std::floor(col_max + most_columns + 1e-9);
+  const double col_first_most = std::ceil(col_min - most_box_columns - 1e-9);
+  const double col_last_most = std::floor(col_max + most_box_columns + 1e-9);
   if (row_min - least_rows - 1e-9 <= row_first_most && row_max + least_rows + 1e-9 >= row_last_most &&
-      col_min - least_columns - 1e-9 <= col_first_most && col_max + least_columns + 1e-9 >= col_last_most) {
+      col_min - least_box_columns - 1e-9 <= col_first_most && col_max + least_box_columns + 1e-9 >= col_last_most) {
     PixelBox out;
     out.row0 = static_cast<std::int32_t>(std::max(0.0, row_first_most));
     out.row1 = static_cast<std::int32_t>(std::min(dem.height - 1.0, row_last_most));

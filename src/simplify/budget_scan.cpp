@@ -280,8 +280,8 @@ bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const Gri
                                  std::sqrt((a.col - c.col) * (a.col - c.col) + (a.row - c.row) * (a.row - c.row)),
                                  std::sqrt((b.col - a.col) * (b.col - a.col) + (b.row - a.row) * (b.row - a.row))};
   for (int k = 0; k < 3; ++k) scan.reach[k] = -margin_px * edge_length[k];
-  scan.min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.columns - 1e-9)));
-  scan.max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.columns + 1e-9)));
+  scan.min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.boxColumns() - 1e-9)));
+  scan.max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.boxColumns() + 1e-9)));
   scan.min_row = static_cast<int>(std::max(0.0, std::ceil(std::min({a.row, b.row, c.row}) - margin.rows - 1e-9)));
   scan.max_row = static_cast<int>(std::min(dem.height - 1.0, std::floor(std::max({a.row, b.row, c.row}) + margin.rows + 1e-9)));
   std::size_t pixel = 0;

@@ -1292,8 +1292,8 @@ class GreedyInsertion {
     const std::int32_t y0 = window_.y0 + (fixed ? 1 : 0), y1 = window_.y1 - (fixed ? 1 : 0);
     const auto first = [](double value) { return static_cast<std::int64_t>(std::ceil(value - 1e-9)); };
     const auto last = [](double value) { return static_cast<std::int64_t>(std::floor(value + 1e-9)); };
-    const std::int64_t col0 = std::max<std::int64_t>(x0, first(std::min({a.x, b.x, c.x}) - margin.columns));
-    const std::int64_t col1 = std::min<std::int64_t>(x1, last(std::max({a.x, b.x, c.x}) + margin.columns));
+    const std::int64_t col0 = std::max<std::int64_t>(x0, first(std::min({a.x, b.x, c.x}) - margin.boxColumns()));
+    const std::int64_t col1 = std::min<std::int64_t>(x1, last(std::max({a.x, b.x, c.x}) + margin.boxColumns()));
     const std::int64_t row0 = std::max<std::int64_t>(y0, first(std::min({a.y, b.y, c.y}) - margin.rows));
     const std::int64_t row1 = std::min<std::int64_t>(y1, last(std::max({a.y, b.y, c.y}) + margin.rows));
     for (std::int64_t row = row0; row <= row1; ++row) {

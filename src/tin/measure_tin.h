@@ -152,8 +152,8 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
                                  std::sqrt((a.col - c.col) * (a.col - c.col) + (a.row - c.row) * (a.row - c.row)),
                                  std::sqrt((b.col - a.col) * (b.col - a.col) + (b.row - a.row) * (b.row - a.row))};
   const double reach[3] = {-margin_px * edge_length[0], -margin_px * edge_length[1], -margin_px * edge_length[2]};
-  const int min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.columns - 1e-9)));
-  const int max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.columns + 1e-9)));
+  const int min_col = static_cast<int>(std::max(0.0, std::ceil(std::min({a.col, b.col, c.col}) - margin.boxColumns() - 1e-9)));
+  const int max_col = static_cast<int>(std::min(dem.width - 1.0, std::floor(std::max({a.col, b.col, c.col}) + margin.boxColumns() + 1e-9)));
   const int min_row = static_cast<int>(std::max(0.0, std::ceil(std::min({a.row, b.row, c.row}) - margin.rows - 1e-9)));
   const int max_row = static_cast<int>(std::min(dem.height - 1.0, std::floor(std::max({a.row, b.row, c.row}) + margin.rows + 1e-9)));
   for (int row = min_row; row <= max_row; ++row) {
