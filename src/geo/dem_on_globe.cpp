@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cstring>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "src/base/error.h"
@@ -176,6 +177,11 @@ DemOnGlobe::DemOnGlobe(const DemGrid& dem, const GeoidGrid* geoid, Progress* pro
     row_spacing_m_[static_cast<std::size_t>(row)] = rows;
     max_sin_latitude_[static_cast<std::size_t>(row)] = pole_rows_[static_cast<std::size_t>(row)] ? 0.0 : sin_latitude;
   });
+  double least = std::numeric_limits<double>::infinity();
+  for (std::int32_t row = 0; row < dem.height; ++row) {
+    if (!pole_rows_[static_cast<std::size_t>(row)]) least = std::min(least, column_spacing_m_[static_cast<std::size_t>(row)]);
+  }
+  least_column_spacing_m_ = std::isfinite(least) ? least : 0.0;
   if (dem.width > 2) {
     const std::int32_t middle = dem.height / 2;
     const double seam = horizontal(dem.width - 1, middle, 0, middle);

@@ -121,6 +121,8 @@ class DemOnGlobe {
   // (horizontal, heights left out).
   double columnSpacing(std::int32_t row) const { return column_spacing_m_[static_cast<std::size_t>(row)]; }
   double rowSpacing(std::int32_t row) const { return row_spacing_m_[static_cast<std::size_t>(row)]; }
+  // The least columnSpacing of the rows off the poles (0 if none).
+  double leastColumnSpacing() const { return least_column_spacing_m_; }
   // The largest |sin latitude| of the verticals of row `row`'s pixels (0 on a pole row, whose
   // pixels have no column to stray by).
   double maxSinLatitude(std::int32_t row) const { return max_sin_latitude_[static_cast<std::size_t>(row)]; }
@@ -169,6 +171,7 @@ class DemOnGlobe {
   std::vector<double> column_spacing_m_, row_spacing_m_, max_sin_latitude_;
   bool wraps_longitude_ = false;
   double degrees_per_column_ = 0;
+  double least_column_spacing_m_ = 0;
   bool has_pole_rows_ = false;
 };
 

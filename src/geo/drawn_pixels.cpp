@@ -56,12 +56,16 @@ PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& co
   const auto last_row = static_cast<std::int32_t>(std::clamp(std::ceil(row_max) + 1, 0.0, dem.height - 1.0));
   double row_spacing = std::numeric_limits<double>::infinity(), column_spacing = row_spacing;
   double sin_lat = 0;
-  bool pole_row = false;
+  bool pole_row = false, pole_row_among_corners = false;
   for (std::int32_t row = first_row; row <= last_row; ++row) {
     if (row < dem.height - 1) row_spacing = std::min(row_spacing, globe.rowSpacing(row));
-    if (!globe.poleRow(row)) column_spacing = std::min(column_spacing, globe.columnSpacing(row));
-    else pole_row = true;
     sin_lat = std::max(sin_lat, globe.maxSinLatitude(row));
+    if (!globe.poleRow(row)) {
+      column_spacing = std::min(column_spacing, globe.columnSpacing(row));
+      continue;
+    }
+    pole_row = true;
+    pole_row_among_corners = pole_row_among_corners || (row >= std::floor(row_min) && row <= std::ceil(row_max));
   }
   const double tan_lat = std::min(1e6, sin_lat / std::sqrt(std::max(1e-12, 1 - sin_lat * sin_lat)));
   const double bulge_m = longest_edge_m * longest_edge_m * (1 + tan_lat) / (2 * kRadius_m);
@@ -72,10 +76,13 @@ PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& co
                                                                        : static_cast<double>(dem.width);
   if (!std::isfinite(margin.rows)) margin.rows = 0;  // a single row
   const double degrees = globe.degreesPerColumn();
-  if (degrees > 0 && !pole_row && column_spacing > 0 && std::isfinite(column_spacing) &&
-      (col_max - col_min) * degrees <= 90) {
-    const double shift_columns = 2 * shift_m * globe.slack() / column_spacing;
-    if (shift_columns * degrees < 45) margin.longitude_columns = shift_columns;
+  if (degrees > 0 && (col_max - col_min) * degrees <= 90) {
+    if (shift_m == 0 && !pole_row_among_corners) {
+      margin.longitude_columns = 0;  // the drawn corners are the grid's, none on the axis
+    } else if (!pole_row && column_spacing > 0 && std::isfinite(column_spacing)) {
+      const double shift_columns = 2 * shift_m * globe.slack() / column_spacing;
+      if (shift_columns * degrees < 45) margin.longitude_columns = shift_columns;
+    }
   }
   return margin;
 }

@@ -58,8 +58,10 @@ PixelBox candidatePixels(const DemOnGlobe& globe, const std::array<GridCorner, 3
 // smallest column spacing of the rows the corners lie between (a spacing is at most rho
 // times the column's angle; rho varies with height by 0.3 % at most). `longitude_columns` is
 // that where the corners span at most 90 degrees, no pole row is among their rows (and the
-// rows next to them) and the bound is below 45 degrees, else infinity. The box's columns
-// grow by boxColumns(); a stray pixel is still within `columns` and `rows` of the triangle.
+// rows next to them) and the bound is below 45 degrees; with no shift (the drawn corners are
+// the grid's) 0 where the corners span at most 90 degrees and no pole row is among their
+// rows; else infinity. The box's columns grow by boxColumns(); a stray pixel is still within
+// `columns` and `rows` of the triangle. (A triangle with a corner at a pole: scanMargin.)
 struct PixelMargin {
   double columns = 0;
   double rows = 0;

@@ -11,6 +11,7 @@
 // pass. O(pixels covered). Does not modify anything.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <span>
@@ -121,6 +122,44 @@ inline bool coveredInsideOnGlobe(const DemOnGlobe& globe, const GridPoint& a, co
   return true;
 }
 
+// forEachCoveredPixelOnGlobe's margin (the simplifier's budget scan, budget_scan.cpp, takes
+// the same): strayMargin of the corners (onPoleRow: on a pole row), with no shift. With a
+// corner at a pole, and the others at most 90 degrees of longitude apart on a WGS84
+// longitude and latitude DEM, the scan's box needs hardly more columns than its corners':
+// the triangle's shadow on the equator plane has a corner at the axis, or as near it as the
+// placement puts the pole (nanometres), so its points at a distance rho from the axis lie
+// between the other corners' longitudes, give or take asin(that distance / rho), less than
+// twice it over the least column spacing in columns (DemOnGlobe::leastColumnSpacing; as for
+// PixelMargin's shift). The scan leaves pole-row pixels outside the triangle in the grid
+// alone.
+template <typename OnPoleRow>
+PixelMargin scanMargin(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                       const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double longest_edge_m,
+                       OnPoleRow&& onPoleRow) {
+  const std::array<bool, 3> at_pole{onPoleRow(a), onPoleRow(b), onPoleRow(c)};
+  PixelMargin margin = strayMargin(globe, {GridCorner{a.col, a.row, at_pole[0]}, GridCorner{b.col, b.row, at_pole[1]},
+                                           GridCorner{c.col, c.row, at_pole[2]}},
+                                   longest_edge_m, 0.0);
+  if (!(at_pole[0] || at_pole[1] || at_pole[2]) || globe.degreesPerColumn() <= 0) return margin;
+  const std::array<const GridPoint*, 3> grid{&a, &b, &c};
+  const std::array<const EcefPoint*, 3> drawn{&pa, &pb, &pc};
+  double col_min = 1e300, col_max = -1e300, off_axis_m = 0;
+  for (std::size_t k = 0; k < 3; ++k) {
+    if (at_pole[k]) {
+      off_axis_m = std::max(off_axis_m, std::hypot(drawn[k]->x, drawn[k]->y));
+      continue;
+    }
+    col_min = std::min(col_min, grid[k]->col);
+    col_max = std::max(col_max, grid[k]->col);
+  }
+  const double degrees = globe.degreesPerColumn(), least_spacing_m = globe.leastColumnSpacing();
+  const double off_axis_columns = least_spacing_m > 0 ? 2 * off_axis_m / least_spacing_m : 1e300;
+  if (col_min <= col_max && (col_max - col_min) * degrees <= 90 && off_axis_columns * degrees < 1e-3) {
+    margin.longitude_columns = std::min(margin.columns, off_axis_columns);
+  }
+  return margin;
+}
+
 template <typename Visit>
 void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                                 const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, Visit&& visit) {
@@ -136,11 +175,7 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
     return p.row == row && row >= 0 && row < dem.height && globe.poleRow(static_cast<std::int32_t>(row));
   };
   PixelMargin margin;
-  if (!degenerate) {
-    margin = strayMargin(globe, {GridCorner{a.col, a.row, onPoleRow(a)}, GridCorner{b.col, b.row, onPoleRow(b)},
-                                 GridCorner{c.col, c.row, onPoleRow(c)}},
-                         drawn.longestEdge(), 0.0);
-  }
+  if (!degenerate) margin = scanMargin(globe, a, b, c, pa, pb, pc, drawn.longestEdge(), onPoleRow);
   const double margin_px = std::max(margin.columns, margin.rows);
   // Inside (or on) the triangle in the grid: each edge function, signed so that the inside is
   // positive, at least -eps (a relative tolerance of 1e-9 of the doubled area). Outside, a
