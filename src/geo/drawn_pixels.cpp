@@ -76,12 +76,12 @@ PixelMargin strayMarginOf(const Rows& globe, const std::array<GridCorner, 3>& co
                                                                        : static_cast<double>(dem.width);
   if (!std::isfinite(margin.rows)) margin.rows = 0;  // a single row
   const double degrees = globe.degreesPerColumn();
-  if (degrees > 0 && (col_max - col_min) * degrees <= 90) {
+  if (longitudeBoundHolds(col_max - col_min, degrees)) {
     if (shift_m == 0 && !pole_row_among_corners) {
       margin.longitude_columns = 0;  // the drawn corners are the grid's, none on the axis
     } else if (!pole_row && column_spacing > 0 && std::isfinite(column_spacing)) {
-      const double shift_columns = 2 * shift_m * globe.slack() / column_spacing;
-      if (shift_columns * degrees < 45) margin.longitude_columns = shift_columns;
+      const double shift_columns = shiftColumns(shift_m * globe.slack(), column_spacing);
+      if (shiftColumnsHold(shift_columns, degrees)) margin.longitude_columns = shift_columns;
     }
   }
   return margin;

@@ -70,6 +70,16 @@ struct PixelMargin {
 };
 PixelMargin strayMargin(const DemOnGlobe& globe, const std::array<GridCorner, 3>& corners, double longest_edge_m,
                         double shift_m);
+// The longitude bound's parts, one arithmetic for strayMargin, PixelBoxes and scanMargin:
+// whether corners `span_columns` apart may take it, and the columns a corner moved by
+// `shift_m` may add where the least column spacing is `column_spacing_m`.
+inline bool longitudeBoundHolds(double span_columns, double degrees_per_column) {
+  return degrees_per_column > 0 && span_columns * degrees_per_column <= 90;
+}
+inline double shiftColumns(double shift_m, double column_spacing_m) { return 2 * shift_m / column_spacing_m; }
+inline bool shiftColumnsHold(double shift_columns, double degrees_per_column) {
+  return shift_columns * degrees_per_column < 45;
+}
 
 // The per-row figures candidatePixels reads of a DEM's globe (DemOnGlobe::rowSpacing,
 // columnSpacing, maxSinLatitude, poleRow), for a whole mosaic, collected from the globes of

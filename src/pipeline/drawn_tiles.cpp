@@ -291,9 +291,9 @@ PixelBox PixelBoxes::box(const std::array<GridCorner, 3>& corners, double longes
   // strayMargin's longitude_columns (no pole row here): the box grows by the smaller margin.
   double least_box_columns = least_columns, most_box_columns = most_columns;
   const double degrees = globe_.degreesPerColumn();
-  if (degrees > 0 && (col_max - col_min) * degrees <= 90) {
-    const double least_shift = 2 * shift_m / column_high, most_shift = 2 * shift_m / column_low;
-    const bool least_bounds = least_shift * degrees < 45, most_bounds = most_shift * degrees < 45;
+  if (longitudeBoundHolds(col_max - col_min, degrees)) {
+    const double least_shift = shiftColumns(shift_m, column_high), most_shift = shiftColumns(shift_m, column_low);
+    const bool least_bounds = shiftColumnsHold(least_shift, degrees), most_bounds = shiftColumnsHold(most_shift, degrees);
     if (least_bounds != most_bounds) return candidatePixels(globe_, corners, longest_edge_m, shift_m);
     if (least_bounds) {
       least_box_columns = std::min(least_columns, least_shift);

@@ -265,12 +265,7 @@ bool exceedsBudgetOnGlobe(const DemOnGlobe& globe, const GridPoint& a, const Gri
   }
   // forEachCoveredPixelOnGlobe's margin, tolerance, reach and box.
   const bool poles = globe.hasPoleRows();
-  const auto onPoleRow = [&](const GridPoint& p) {
-    if (!poles) return false;
-    const double row = std::round(p.row);
-    return p.row == row && row >= 0 && row < dem.height && globe.poleRow(static_cast<std::int32_t>(row));
-  };
-  const PixelMargin margin = scanMargin(globe, a, b, c, pa, pb, pc, drawn.longestEdge(), onPoleRow);
+  const PixelMargin margin = scanMargin(globe, a, b, c, pa, pb, pc, drawn.longestEdge());
   const double margin_px = std::max(margin.columns, margin.rows);
   GlobeScan scan{globe, dem, a, b, c, drawn, budget_m, area2, area2 > 0 ? 1.0 : -1.0, std::fabs(area2), 1e-9 * std::fabs(area2),
                  {}, 0, 0, 0, 0, poles};

@@ -123,7 +123,7 @@ inline bool coveredInsideOnGlobe(const DemOnGlobe& globe, const GridPoint& a, co
 }
 
 // forEachCoveredPixelOnGlobe's margin (the simplifier's budget scan, budget_scan.cpp, takes
-// the same): strayMargin of the corners (onPoleRow: on a pole row), with no shift. With a
+// the same): strayMargin of the corners (at a pole: exactly on a pole row), with no shift. With a
 // corner at a pole, and the others at most 90 degrees of longitude apart on a WGS84
 // longitude and latitude DEM, the scan's box needs hardly more columns than its corners':
 // the triangle's shadow on the equator plane has a corner at the axis, or as near it as the
@@ -132,10 +132,13 @@ inline bool coveredInsideOnGlobe(const DemOnGlobe& globe, const GridPoint& a, co
 // twice it over the least column spacing in columns (DemOnGlobe::leastColumnSpacing; as for
 // PixelMargin's shift). The scan leaves pole-row pixels outside the triangle in the grid
 // alone.
-template <typename OnPoleRow>
-PixelMargin scanMargin(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
-                       const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double longest_edge_m,
-                       OnPoleRow&& onPoleRow) {
+inline PixelMargin scanMargin(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
+                              const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double longest_edge_m) {
+  const auto onPoleRow = [&](const GridPoint& p) {
+    if (!globe.hasPoleRows()) return false;
+    const double row = std::round(p.row);
+    return p.row == row && row >= 0 && row < globe.dem().height && globe.poleRow(static_cast<std::int32_t>(row));
+  };
   const std::array<bool, 3> at_pole{onPoleRow(a), onPoleRow(b), onPoleRow(c)};
   PixelMargin margin = strayMargin(globe, {GridCorner{a.col, a.row, at_pole[0]}, GridCorner{b.col, b.row, at_pole[1]},
                                            GridCorner{c.col, c.row, at_pole[2]}},
@@ -153,9 +156,9 @@ PixelMargin scanMargin(const DemOnGlobe& globe, const GridPoint& a, const GridPo
     col_max = std::max(col_max, grid[k]->col);
   }
   const double degrees = globe.degreesPerColumn(), least_spacing_m = globe.leastColumnSpacing();
-  const double off_axis_columns = least_spacing_m > 0 ? 2 * off_axis_m / least_spacing_m : 1e300;
-  if (col_min <= col_max && (col_max - col_min) * degrees <= 90 && off_axis_columns * degrees < 1e-3) {
-    margin.longitude_columns = std::min(margin.columns, off_axis_columns);
+  const double off_axis_columns = least_spacing_m > 0 ? shiftColumns(off_axis_m, least_spacing_m) : 1e300;
+  if (col_min <= col_max && longitudeBoundHolds(col_max - col_min, degrees) && off_axis_columns * degrees < 1e-3) {
+    margin.longitude_columns = off_axis_columns;
   }
   return margin;
 }
@@ -169,13 +172,8 @@ void forEachCoveredPixelOnGlobe(const DemOnGlobe& globe, const GridPoint& a, con
   const DrawnTriangle drawn(pa, pb, pc);
   const bool degenerate = drawn.degenerate();
   const bool poles = globe.hasPoleRows();
-  const auto onPoleRow = [&](const GridPoint& p) {
-    if (!poles) return false;
-    const double row = std::round(p.row);
-    return p.row == row && row >= 0 && row < dem.height && globe.poleRow(static_cast<std::int32_t>(row));
-  };
   PixelMargin margin;
-  if (!degenerate) margin = scanMargin(globe, a, b, c, pa, pb, pc, drawn.longestEdge(), onPoleRow);
+  if (!degenerate) margin = scanMargin(globe, a, b, c, pa, pb, pc, drawn.longestEdge());
   const double margin_px = std::max(margin.columns, margin.rows);
   // Inside (or on) the triangle in the grid: each edge function, signed so that the inside is
   // positive, at least -eps (a relative tolerance of 1e-9 of the doubled area). Outside, a
