@@ -382,17 +382,33 @@ class ClusterCollapser {
 
   // u's alive triangles and its ring (the vertex after u in each). Each alive triangle holding u
   // holds exactly one vertex of u's chain (two would have made it vanish when they merged).
-  void gatherStar(std::uint32_t u, std::vector<std::uint32_t>& triangles, std::vector<std::uint32_t>& ring) const {
+  // On the way the chain forgets what it no longer holds (the same triangles in the same order
+  // next time, fewer entries to pass): each owner's list keeps its alive triangles holding u at
+  // its front (star_fill ends it), and an owner left with none leaves the chain.
+  void gatherStar(std::uint32_t u, std::vector<std::uint32_t>& triangles, std::vector<std::uint32_t>& ring) {
     triangles.clear();
     ring.clear();
-    for (std::uint32_t owner = u; owner != kNone; owner = a_.absorbed_next[owner]) {
-      for (std::uint32_t i = a_.star_start[owner]; i < a_.star_start[owner + 1]; ++i) {
+    if (a_.removed[u]) return;  // no triangle holds it (and its chain is another vertex's now)
+    std::uint32_t previous = kNone;
+    for (std::uint32_t owner = u; owner != kNone;) {
+      const std::uint32_t next = a_.absorbed_next[owner];
+      std::uint32_t kept = a_.star_start[owner];
+      for (std::uint32_t i = a_.star_start[owner]; i < a_.star_fill[owner]; ++i) {
         const std::uint32_t t = a_.star[i];
         const std::uint32_t* c = &a_.corners[3 * t];
         if (!a_.alive[t] || (c[0] != u && c[1] != u && c[2] != u)) continue;
+        a_.star[kept++] = t;
         triangles.push_back(t);
         ring.push_back(after(t, u));
       }
+      a_.star_fill[owner] = kept;
+      if (kept == a_.star_start[owner] && previous != kNone) {
+        a_.absorbed_next[previous] = next;  // owner != u: it leaves u's chain
+        if (next == kNone) a_.absorbed_last[u] = previous;
+      } else {
+        previous = owner;
+      }
+      owner = next;
     }
   }
 
