@@ -34,6 +34,14 @@ struct GridCorner {
   bool at_pole = false;  // at a pole: col means nothing
 };
 
+// The corner at grid position (col, row) of `globe`'s DEM: at a pole when it lies exactly on
+// a pole row (DemOnGlobe::poleRow).
+inline GridCorner gridCornerOf(const DemOnGlobe& globe, double col, double row) {
+  const bool at_pole = globe.hasPoleRows() && row == std::round(row) && row >= 0 && row < globe.dem().height &&
+                       globe.poleRow(static_cast<std::int32_t>(row));
+  return {col, row, at_pole};
+}
+
 // Pixels [col0, col1] x [row0, row1]; columns outside [0, width) are taken modulo the width
 // when the DEM wraps around the globe (DemOnGlobe::wrapsLongitude), else clipped.
 struct PixelBox {

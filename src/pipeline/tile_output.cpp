@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "formats/geoid/read_geoid.h"
+#include "src/geo/drawn_pixels.h"
 #include "src/geo/place_on_globe.h"
 #include "tileset/implicit_tileset.h"
 
@@ -202,9 +203,7 @@ DrawnContent drawnContent(const PyramidTile& tile, const TinMesh& mesh, const Pl
     tile_vertex[i] = static_cast<std::uint32_t>(out.positions.size());
     out.positions.push_back(p);
     out.normals.push_back(normals[v]);
-    const bool at_pole = g.row == std::round(g.row) && g.row >= 0 && g.row < globe.dem().height &&
-                         globe.poleRow(static_cast<std::int32_t>(g.row));
-    out.grid.push_back({g.col, g.row, at_pole});
+    out.grid.push_back(gridCornerOf(globe, g.col, g.row));
   }
   out.triangle_indices.reserve(3 * triangles);
   for (std::size_t t = 0; t < triangles; ++t) {

@@ -134,15 +134,10 @@ inline bool coveredInsideOnGlobe(const DemOnGlobe& globe, const GridPoint& a, co
 // alone.
 inline PixelMargin scanMargin(const DemOnGlobe& globe, const GridPoint& a, const GridPoint& b, const GridPoint& c,
                               const EcefPoint& pa, const EcefPoint& pb, const EcefPoint& pc, double longest_edge_m) {
-  const auto onPoleRow = [&](const GridPoint& p) {
-    if (!globe.hasPoleRows()) return false;
-    const double row = std::round(p.row);
-    return p.row == row && row >= 0 && row < globe.dem().height && globe.poleRow(static_cast<std::int32_t>(row));
-  };
-  const std::array<bool, 3> at_pole{onPoleRow(a), onPoleRow(b), onPoleRow(c)};
-  PixelMargin margin = strayMargin(globe, {GridCorner{a.col, a.row, at_pole[0]}, GridCorner{b.col, b.row, at_pole[1]},
-                                           GridCorner{c.col, c.row, at_pole[2]}},
-                                   longest_edge_m, 0.0);
+  const std::array<GridCorner, 3> corners{gridCornerOf(globe, a.col, a.row), gridCornerOf(globe, b.col, b.row),
+                                          gridCornerOf(globe, c.col, c.row)};
+  const std::array<bool, 3> at_pole{corners[0].at_pole, corners[1].at_pole, corners[2].at_pole};
+  PixelMargin margin = strayMargin(globe, corners, longest_edge_m, 0.0);
   if (!(at_pole[0] || at_pole[1] || at_pole[2]) || globe.degreesPerColumn() <= 0) return margin;
   const std::array<const GridPoint*, 3> grid{&a, &b, &c};
   const std::array<const EcefPoint*, 3> drawn{&pa, &pb, &pc};
