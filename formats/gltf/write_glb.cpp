@@ -25,8 +25,9 @@
 // This definition takes the library's place (the executable's exported function interposes
 // libdraco's, as the dynamic linker does for any default-visibility function) and returns
 // the same numbers: the same sum, term by term in ascending symbol order, of counts taken
-// from a sorted copy of the symbols where that is smaller than the table (glb_test.cpp
-// compares it with libdraco's own; tiles are byte-identical).
+// from a table no longer than twice the symbols (plus 1024), and of the few symbols beyond it
+// sorted (glb_test.cpp compares it with libdraco's own; tiles are byte-identical). Sorting a
+// copy of all the symbols instead took 4 % of the writing's CPU on SRTM Gabon.
 namespace draco {
 std::int64_t ComputeShannonEntropy(const std::uint32_t* symbols, int num_symbols, int max_value,
                                    int* out_num_unique_symbols) {
@@ -37,21 +38,28 @@ std::int64_t ComputeShannonEntropy(const std::uint32_t* symbols, int num_symbols
     ++unique;
     total_bits += frequency * std::log2(static_cast<double>(frequency) / count_d);
   };
-  if (static_cast<std::int64_t>(max_value) < 2 * static_cast<std::int64_t>(num_symbols) + 1024) {
-    std::vector<int> frequencies(static_cast<std::size_t>(max_value) + 1, 0);
-    for (int i = 0; i < num_symbols; ++i) ++frequencies[symbols[i]];
-    for (const int frequency : frequencies) {
-      if (frequency > 0) add(frequency);
+  // Symbols below the table's length are counted in it, the rest (a tile's few first values
+  // from zero) in a sorted list after it: ascending order throughout.
+  const std::size_t table = static_cast<std::size_t>(
+      std::min<std::int64_t>(static_cast<std::int64_t>(max_value) + 1, 2 * static_cast<std::int64_t>(num_symbols) + 1024));
+  std::vector<int> frequencies(table, 0);
+  std::vector<std::uint32_t> beyond;
+  for (int i = 0; i < num_symbols; ++i) {
+    if (symbols[i] < table) {
+      ++frequencies[symbols[i]];
+    } else {
+      beyond.push_back(symbols[i]);
     }
-  } else {
-    std::vector<std::uint32_t> sorted(symbols, symbols + num_symbols);
-    std::sort(sorted.begin(), sorted.end());
-    for (std::size_t i = 0; i < sorted.size();) {
-      std::size_t end = i + 1;
-      while (end < sorted.size() && sorted[end] == sorted[i]) ++end;
-      add(static_cast<int>(end - i));
-      i = end;
-    }
+  }
+  for (const int frequency : frequencies) {
+    if (frequency > 0) add(frequency);
+  }
+  std::sort(beyond.begin(), beyond.end());
+  for (std::size_t i = 0; i < beyond.size();) {
+    std::size_t end = i + 1;
+    while (end < beyond.size() && beyond[end] == beyond[i]) ++end;
+    add(static_cast<int>(end - i));
+    i = end;
   }
   if (out_num_unique_symbols != nullptr) *out_num_unique_symbols = unique;
   return static_cast<std::int64_t>(-total_bits);
