@@ -163,11 +163,14 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
       }
       progress.endStage();
     }
-    if (l == 0) level.edge_count = meshEdgeCount(level.mesh);  // coarser levels: counted below
     const std::size_t triangles = level.mesh.triangleCount();
-    if (options.coarser_levels > 0 && l >= static_cast<std::size_t>(options.coarser_levels)) break;
-    if (l > 0 && options.coarser_levels == 0 && levels[l - 1].partition.cluster_count == 1) break;
-    if (triangles < 2) break;
+    // A level's edges are counted by its simplification (from the topology it builds), or here
+    // when it is the coarsest (or when the stop rule below counted them already).
+    if ((options.coarser_levels > 0 && l >= static_cast<std::size_t>(options.coarser_levels)) ||
+        (l > 0 && options.coarser_levels == 0 && levels[l - 1].partition.cluster_count == 1) || triangles < 2) {
+      if (level.edge_count == 0) level.edge_count = meshEdgeCount(level.mesh);
+      break;
+    }
 
     progress.beginStage("level " + std::to_string(l + 1) + ": clusters", 0);
     if (options.repartition || l == 0) {
@@ -211,8 +214,11 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
                                                         level.partition.cluster_count, constraints, simplify);
     progress.endStage();
     progress.throwIfCancelled();
-    // The coarser level's edges: counted, and listed when constraints must be found among them.
-    const std::size_t edge_count = meshEdgeCount(simplified.mesh);
+    level.edge_count = simplified.input_edges;
+    // The coarser level's edges: counted now when the stop rule needs them (else by its own
+    // simplification, or when it is the coarsest), and listed when constraints must be found
+    // among them.
+    const std::size_t edge_count = options.coarser_levels == 0 ? meshEdgeCount(simplified.mesh) : 0;
     const std::vector<std::uint64_t> edges = constraints.empty() ? std::vector<std::uint64_t>() : meshEdgeKeys(simplified.mesh);
     if (options.coarser_levels == 0) {
       // A level must be worth its tiles: about level_ratio of the edges, or (when the budget

@@ -197,6 +197,9 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
                                       " vertices; expected one per vertex");
   }
   InputTopology topology = buildTopology(mesh);
+  const auto border_sides = static_cast<std::size_t>(
+      std::count(topology.opposite_corner.begin(), topology.opposite_corner.end(), kNone));
+  const std::size_t input_edges = (topology.opposite_corner.size() + border_sides) / 2;
 
   std::vector<std::uint64_t> constrained_keys;
   constrained_keys.reserve(constrained_edges.size());
@@ -251,6 +254,7 @@ ClusterSimplification simplifyClusters(const DemGrid& dem, const TinMesh& mesh,
   // Assemble by vertex index: a vertex shared by clusters is locked in each, so it is the same
   // input vertex at the same input position in all of them.
   ClusterSimplification result;
+  result.input_edges = input_edges;
   const std::size_t vertex_count = mesh.vertices.size();
   // Per input vertex: bit 1 moved (maybe removed after), bit 0 used by a triangle (survives).
   std::vector<std::uint8_t> state(vertex_count, 0);

@@ -168,6 +168,9 @@ struct ClusterSimplification {
   // face steeper than 100 (rise over run, about 89.4 degrees).
   std::size_t refused_for_error = 0;
   std::size_t refused_for_flip = 0;
+  // The input mesh's edges, each counted once (an edge-manifold mesh: its corners plus its
+  // border sides, over two), from the topology the simplification builds anyway.
+  std::size_t input_edges = 0;
 };
 
 inline constexpr std::uint32_t kRemovedVertex = 0xffffffff;
