@@ -215,11 +215,11 @@ std::vector<Level> buildLevels(const DemGrid& dem, TinMesh finest, const LevelOp
     progress.endStage();
     progress.throwIfCancelled();
     level.edge_count = simplified.input_edges;
-    // The coarser level's edges: counted now when the stop rule needs them (else by its own
-    // simplification, or when it is the coarsest), and listed when constraints must be found
-    // among them.
-    const std::size_t edge_count = options.coarser_levels == 0 ? meshEdgeCount(simplified.mesh) : 0;
+    // The coarser level's edges: listed when constraints must be found among them, counted
+    // now when the stop rule needs them (the list's length, if listed), else by its own
+    // simplification or when it is the coarsest.
     const std::vector<std::uint64_t> edges = constraints.empty() ? std::vector<std::uint64_t>() : meshEdgeKeys(simplified.mesh);
+    const std::size_t edge_count = options.coarser_levels != 0 ? 0 : !constraints.empty() ? edges.size() : meshEdgeCount(simplified.mesh);
     if (options.coarser_levels == 0) {
       // A level must be worth its tiles: about level_ratio of the edges, or (when the budget
       // stopped it) at least 10 % fewer triangles. Otherwise the locked edges (outer border,
