@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what terratiles needs on Debian 12, only what is missing: the compiler and CMake,
 # the Debian packages of every library (CGAL, METIS, tinygltf, Draco, GeographicLib, GDAL,
-# doctest, nlohmann-json, CLI11, TBB, Open MPI), PROJ's grids, Node.js, and the npm validators.
+# doctest, nlohmann-json, CLI11, TBB, Open MPI, zlib), PROJ's grids, Node.js, and the npm validators.
 # Usage: tools/setup/install_dependencies.sh [--viewer | --browser]
 #   --viewer  adds the npm packages of samples/viewer (cesium), to view a tileset;
 #   --browser adds what the browser test needs: the viewer, Debian's chromium, and the npm
@@ -12,7 +12,7 @@ cd "$(dirname "$0")/../.."
 packages=(g++ make cmake ccache pkg-config
   libcgal-dev libmetis-dev libtinygltf-dev libdraco-dev libgeographiclib-dev libgdal-dev
   doctest-dev nlohmann-json3-dev libcli11-dev libtbb-dev libproj-dev proj-data nodejs npm
-  libmeshoptimizer-dev openmpi-bin libopenmpi-dev)
+  libmeshoptimizer-dev openmpi-bin libopenmpi-dev zlib1g-dev)
 if [[ "${1:-}" == "--browser" ]]; then packages+=(chromium); fi
 
 missing=()
