@@ -100,7 +100,8 @@ void validate(const TerrainTileMesh& mesh) {
   }
   if (!mesh.normals.empty() && mesh.normals.size() != mesh.vertices.size()) {
     throw Error(ErrorCode::Input, "quantized-mesh tile: " + std::to_string(mesh.normals.size()) + " normals for " +
-                                      std::to_string(mesh.vertices.size()) + " vertices; expected one per vertex or none");
+                                      std::to_string(mesh.vertices.size()) +
+                                      " vertices; expected one per vertex or none");
   }
 }
 

@@ -36,17 +36,9 @@
 #include <vector>
 
 #include "src/geo/crs_transform.h"
-#include "src/tiling/tile_scheme.h"
+#include "src/tiling/clip_to_tile.h"
 
 namespace terratiles {
-
-// One terrain tile before encoding.
-struct TerrainTileMesh {
-  TileBounds rectangle;                     // degrees of longitude and latitude
-  std::vector<GeodeticPoint> vertices;      // inside the rectangle or on its sides
-  std::vector<std::uint32_t> triangles;     // 3 per triangle, counter-clockwise seen from above
-  std::vector<std::array<float, 3>> normals;  // empty, or a unit ECEF normal per vertex
-};
 
 struct QuantizedMeshOptions {
   bool vertex_normals = true;  // write the octvertexnormals extension (when normals are given)

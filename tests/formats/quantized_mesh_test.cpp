@@ -75,7 +75,8 @@ std::vector<nlohmann::json> decodeWithLoadersGl(const std::vector<std::string>& 
   std::array<char, 65536> buffer;
   while (fgets(buffer.data(), buffer.size(), pipe)) output += buffer.data();
   const int status = pclose(pipe);
-  REQUIRE_MESSAGE(status == 0, "the loaders.gl decoder failed (run the README test set-up): " << output.substr(0, 2000));
+  REQUIRE_MESSAGE(status == 0,
+                  "the loaders.gl decoder failed (run the README test set-up): " << output.substr(0, 2000));
   std::vector<nlohmann::json> decoded;
   std::size_t start = 0;
   while (start < output.size()) {
@@ -182,7 +183,9 @@ void checkDecoded(const nlohmann::json& got, const RealTile& tile, const Decoded
     CHECK(listed.size() == list.size());
     CHECK(listed == tile.on_side[static_cast<std::size_t>(side)]);
     const int along = side % 2 == 0 ? 1 : 0;
-    for (std::size_t k = 1; k < list.size(); ++k) CHECK(written.quantized[list[k - 1]][along] < written.quantized[list[k]][along]);
+    for (std::size_t k = 1; k < list.size(); ++k) {
+      CHECK(written.quantized[list[k - 1]][along] < written.quantized[list[k]][along]);
+    }
     CHECK(list.size() >= 2);
   }
   // The bounding sphere holds every decoded vertex.
@@ -199,7 +202,8 @@ void checkDecoded(const nlohmann::json& got, const RealTile& tile, const Decoded
   // in view either. The cameras that tell are those that see the tile near their horizon: at
   // 1 m to 3 Earth radii up, between 2 degrees nearer and 2 degrees farther than the horizon
   // from over the tile's middle, all round it. Tested on the sides' vertices and every 50th.
-  const EcefPoint occlusion{header["horizonOcclusionPointX"].get<double>(), header["horizonOcclusionPointY"].get<double>(),
+  const EcefPoint occlusion{header["horizonOcclusionPointX"].get<double>(),
+                            header["horizonOcclusionPointY"].get<double>(),
                             header["horizonOcclusionPointZ"].get<double>()};
   std::vector<EcefPoint> tested;
   for (std::size_t i = 0; i < count; ++i) {
@@ -211,7 +215,8 @@ void checkDecoded(const nlohmann::json& got, const RealTile& tile, const Decoded
   const double length = std::hypot(occlusion.x, occlusion.y, occlusion.z);
   const std::array<double, 3> d{occlusion.x / length, occlusion.y / length, occlusion.z / length};
   const std::array<double, 3> e1 = [&] {  // perpendicular to d
-    const std::array<double, 3> a = std::fabs(d[2]) < 0.9 ? std::array<double, 3>{0, 0, 1} : std::array<double, 3>{1, 0, 0};
+    const std::array<double, 3> a =
+        std::fabs(d[2]) < 0.9 ? std::array<double, 3>{0, 0, 1} : std::array<double, 3>{1, 0, 0};
     std::array<double, 3> c{d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]};
     const double n = std::hypot(c[0], c[1], c[2]);
     return std::array<double, 3>{c[0] / n, c[1] / n, c[2] / n};
@@ -222,12 +227,12 @@ void checkDecoded(const nlohmann::json& got, const RealTile& tile, const Decoded
       off(-2 * std::numbers::pi / 180, 2 * std::numbers::pi / 180);
   std::size_t cameras_culling = 0, cameras_seeing = 0, vertices_seen_when_culled = 0;
   for (int c = 0; c < 4000; ++c) {
-    const double r = up(random), azimuth = turn(random), theta = std::acos(1 / r) + off(random);
+    const double radius = up(random), azimuth = turn(random), theta = std::acos(1 / radius) + off(random);
     const double s = std::sin(theta), k = std::cos(theta);
     EcefPoint camera;
-    camera.x = r * (k * d[0] + s * (std::cos(azimuth) * e1[0] + std::sin(azimuth) * e2[0]));
-    camera.y = r * (k * d[1] + s * (std::cos(azimuth) * e1[1] + std::sin(azimuth) * e2[1]));
-    camera.z = r * (k * d[2] + s * (std::cos(azimuth) * e1[2] + std::sin(azimuth) * e2[2]));
+    camera.x = radius * (k * d[0] + s * (std::cos(azimuth) * e1[0] + std::sin(azimuth) * e2[0]));
+    camera.y = radius * (k * d[1] + s * (std::cos(azimuth) * e1[1] + std::sin(azimuth) * e2[1]));
+    camera.z = radius * (k * d[2] + s * (std::cos(azimuth) * e1[2] + std::sin(azimuth) * e2[2]));
     if (visibleFrom(camera, occlusion)) {
       ++cameras_seeing;
       continue;
@@ -287,7 +292,8 @@ TEST_CASE("quantized-mesh: a tile spanning a hemisphere still gets an occlusion 
   // its middle: no point every vertex is in front of exists; the fallback sits far out.
   TerrainTileMesh mesh;
   mesh.rectangle = {-180, -90, 0, 90};
-  mesh.vertices = {{-180, -90, 0}, {0, -90, 0}, {0, 90, 0}, {-180, 90, 0}, {-180, 0, 1000}, {0, 0, 1000}, {-90, 0, 500}};
+  mesh.vertices = {{-180, -90, 0}, {0, -90, 0},     {0, 90, 0},  {-180, 90, 0},
+                   {-180, 0, 1000}, {0, 0, 1000}, {-90, 0, 500}};
   mesh.triangles = {0, 1, 6, 1, 5, 6, 5, 2, 6, 2, 3, 6, 3, 4, 6, 4, 0, 6};
   DecodedTerrainTile written;
   encodeQuantizedMesh(mesh, {}, &written);
