@@ -167,6 +167,33 @@ GltfValidation validateGltfTree(const std::string& dir) {
   return result;
 }
 
+std::vector<nlohmann::json> decodeQuantizedMeshFiles(const std::vector<std::string>& files) {
+  REQUIRE(!files.empty());
+  const std::string errors = files.front() + ".decoder-stderr";
+  std::string command = "node '" + sourceDir() + "/tools/validators/decode_quantized_mesh.mjs'";
+  for (const std::string& file : files) command += " '" + file + "'";
+  FILE* pipe = popen((command + " 2>'" + errors + "'").c_str(), "r");
+  REQUIRE(pipe);
+  std::string output;
+  std::array<char, 65536> buffer;
+  while (fgets(buffer.data(), buffer.size(), pipe)) output += buffer.data();
+  const int status = pclose(pipe);
+  std::ifstream error_file(errors);
+  const std::string error_text((std::istreambuf_iterator<char>(error_file)), std::istreambuf_iterator<char>());
+  std::filesystem::remove(errors);
+  REQUIRE_MESSAGE(status == 0, "the loaders.gl decoder failed (run the README test set-up): "
+                                   << error_text.substr(0, 2000) << output.substr(0, 2000));
+  std::vector<nlohmann::json> decoded;
+  std::size_t start = 0;
+  while (start < output.size()) {
+    const std::size_t end = output.find('\n', start);
+    decoded.push_back(nlohmann::json::parse(output.substr(start, end - start)));
+    start = end == std::string::npos ? output.size() : end + 1;
+  }
+  REQUIRE(decoded.size() == files.size());
+  return decoded;
+}
+
 std::set<std::array<double, 6>> checkStitchedTin(const std::string& path, const DemGrid& dem, double bound_m,
                                               std::size_t uncovered_expected) {
   const CrsTin tin = readTinFile(path);

@@ -94,4 +94,9 @@ struct GltfValidation {
 // every .glb below `dir`.
 GltfValidation validateGltfTree(const std::string& dir);
 
+// Decodes quantized-mesh tiles with loaders.gl (tools/validators/decode_quantized_mesh.mjs,
+// npm @loaders.gl/terrain from the test set-up): one JSON object per file, in order (see the
+// script). REQUIREs that the decoder ran and decoded every file.
+std::vector<nlohmann::json> decodeQuantizedMeshFiles(const std::vector<std::string>& files);
+
 }  // namespace terratiles::test

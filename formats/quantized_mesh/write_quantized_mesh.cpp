@@ -154,6 +154,13 @@ bool horizonOcclusionPoint(const EcefPoint& direction, std::span<const EcefPoint
   return true;
 }
 
+std::array<float, 2> floatRangeAround(double low, double high) {
+  float low_f = static_cast<float>(low), high_f = static_cast<float>(high);
+  if (low_f > low) low_f = std::nextafter(low_f, -std::numeric_limits<float>::infinity());
+  if (high_f < high) high_f = std::nextafter(high_f, std::numeric_limits<float>::infinity());
+  return {low_f, high_f};
+}
+
 std::array<std::uint8_t, 2> octEncodeNormal(const std::array<float, 3>& normal) {
   const double x = normal[0], y = normal[1], z = normal[2];
   const double sum = std::fabs(x) + std::fabs(y) + std::fabs(z);
@@ -197,9 +204,17 @@ std::vector<std::uint8_t> encodeQuantizedMesh(const TerrainTileMesh& mesh, const
       high = std::max(high, mesh.vertices[v].height_m);
     }
   }
-  float low_f = static_cast<float>(low), high_f = static_cast<float>(high);
-  if (low_f > low) low_f = std::nextafter(low_f, -std::numeric_limits<float>::infinity());
-  if (high_f < high) high_f = std::nextafter(high_f, std::numeric_limits<float>::infinity());
+  auto [low_f, high_f] = floatRangeAround(low, high);
+  if (options.height_range) {
+    const auto [range_low, range_high] = *options.height_range;
+    if (count > 0 && !(range_low <= low && high <= range_high)) {
+      throw Error(ErrorCode::Internal, "quantized-mesh tile: heights " + std::to_string(low) + " .. " +
+                                           std::to_string(high) + " m outside the shared range " +
+                                           std::to_string(range_low) + " .. " + std::to_string(range_high) + " m");
+    }
+    low_f = range_low;
+    high_f = range_high;
+  }
   tile.minimum_height_m = low_f;
   tile.maximum_height_m = high_f;
 

@@ -22,15 +22,16 @@
 // needs); vertices no triangle uses are left out. Quantisation: u = round((lon - west) /
 // (east - west) * 32767), v likewise with latitude, height against the header's minimum and
 // maximum, which are the vertices' least and greatest ellipsoidal heights rounded outwards to
-// float. The bounding sphere and the horizon occlusion point are computed from the positions
+// float, or the range the options give. The bounding sphere and the horizon occlusion point are computed from the positions
 // the tile decodes to (DecodedTerrainTile), so they hold for what a client draws.
 //
 // Throws Error(Input) for a rectangle that is empty or outside [-180, 180] x [-90, 90], a
 // vertex outside the rectangle or not finite, a triangle index out of range, normals given
-// for some vertices only, or more than 2^32 - 1 of anything.
+// for some vertices only, a height outside the given range, or more than 2^32 - 1 of anything.
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -43,6 +44,10 @@ namespace terratiles {
 struct QuantizedMeshOptions {
   bool vertex_normals = true;  // write the octvertexnormals extension (when normals are given)
   std::string metadata_json;   // the metadata extension's JSON (empty: none)
+  // The header's minimum and maximum height (metres, low <= high), shared by every tile of a
+  // zoom, so that a vertex two tiles share decodes to the same height in both (a client
+  // interpolates between the two); every vertex must lie in it. Unset: the tile's own range.
+  std::optional<std::array<float, 2>> height_range;
 };
 
 inline constexpr std::uint16_t kQuantizedMax = 32767;
@@ -77,6 +82,9 @@ GeodeticPoint decodedPosition(const TileBounds& rectangle, float minimum_height_
 // every point is above the horizon seen from wherever this point is. False when there is
 // none (the points span too much of the globe, or `direction` is the origin).
 bool horizonOcclusionPoint(const EcefPoint& direction, std::span<const EcefPoint> points, EcefPoint& result);
+
+// [low, high] rounded outwards to floats, as a header holds a height range.
+std::array<float, 2> floatRangeAround(double low, double high);
 
 // CesiumJS's AttributeCompression.octEncodeInRange(normal, 255): two bytes.
 std::array<std::uint8_t, 2> octEncodeNormal(const std::array<float, 3>& normal);

@@ -38,6 +38,7 @@
 #include "src/pipeline/report_maps.h"
 #include "src/lod/grid_pyramid.h"
 #include "src/pipeline/drawn_tiles.h"
+#include "src/pipeline/terrain_output.h"
 #include "src/pipeline/tile_output.h"
 #include "src/base/largest_first.h"
 #include "src/base/ranks.h"
@@ -87,6 +88,16 @@ void validateOptions(const BuildOptions& options) {
   if (options.draco_speed < 0 || options.draco_speed > 10) {
     throw Error(ErrorCode::Usage, "--draco-speed is " + std::to_string(options.draco_speed) +
                                       "; expected 0 (smallest) to 10 (fastest)");
+  }
+  if (options.format == OutputFormat::QuantizedMesh &&
+      (options.lod != LodMethod::Clusters || options.scheme != TileSchemeKind::Geographic || options.implicit_tiling)) {
+    throw Error(ErrorCode::Usage,
+                std::string("--format quantized-mesh takes the clusters' levels on the geographic scheme (its TMS "
+                            "quadtree); found ") +
+                    (options.lod == LodMethod::Grid ? std::string("--lod grid")
+                     : options.implicit_tiling      ? std::string("--implicit")
+                                                    : "--scheme " + std::string(tileSchemeName(options.scheme))) +
+                    "; leave it out");
   }
   if (options.implicit_tiling && (options.lod != LodMethod::Clusters || options.scheme != TileSchemeKind::Geographic)) {
     throw Error(ErrorCode::Usage, std::string("--implicit is for the geographic scheme; found --scheme ") +
@@ -167,6 +178,11 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   validateOptions(options);
   const DemMosaic mosaic = scanDemMosaic(options.inputs, &progress);
   if (const std::int32_t block_pixels = buildBlockPixels(options, mosaic); block_pixels > 0) {
+    if (options.format == OutputFormat::QuantizedMesh) {
+      throw Error(ErrorCode::Usage, "--format quantized-mesh builds the mosaic in one piece, and this one (" +
+                                        std::to_string(mosaic.width) + " x " + std::to_string(mosaic.height) +
+                                        " pixels) would be built in blocks; build a smaller area, or a tileset");
+    }
     return runBlockedPipeline(options, mosaic, block_pixels, progress);
   }
   if (options.resume) {
@@ -175,7 +191,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
                                       " pixels; pass --block-pixels N to build in blocks)");
   }
   if (Ranks::rank() != 0) return {};  // under mpirun, a whole build is rank 0's alone
-  OutputDirectory output(options.output_dir, options.force);
+  const bool terrain = options.format == OutputFormat::QuantizedMesh;
+  OutputDirectory output(options.output_dir, options.force, terrain ? "layer.json" : "tileset.json");
 
   DemGrid dem = readDem(mosaic, "reading DEM", progress);  // its pixels let go before the report's check
   const DemStatistics stats = computeStatistics(dem);
@@ -196,6 +213,15 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   BuildSummary summary;
   summary.output_dir = options.output_dir;
+  // Everything written: into place, and the summary's time.
+  const auto finish = [&] {
+    progress.throwIfCancelled();
+    progress.beginStage("moving the output into place", 0);
+    output.commit();
+    progress.endStage();
+    summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return summary;
+  };
   describeInput(summary, dem, stats, to_wgs84, geoid ? geoid->name : std::string());
 
   // Levels of detail and the triangles of every tile, coarsest zoom first.
@@ -228,7 +254,8 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     ConstrainedTin finest = buildFinestTin(dem, &globe, options.tin_max_error_m, options.constraints, progress);
     frame = std::make_unique<TileFrame>(options.scheme, dem);
     const ZoomPlan plan =
-        planZooms(*frame, finest.mesh, options.tile_triangles, options.max_zoom, options.clusters_per_tile);
+        planZooms(*frame, finest.mesh, options.tile_triangles, options.max_zoom, options.clusters_per_tile,
+                  terrain ? 0 : -1);
     progress.note("zooms " + std::to_string(plan.min_zoom) + " to " + std::to_string(plan.max_zoom) + " (" +
                   std::string(tileSchemeName(options.scheme)) + "), clusters assigned by " +
                   std::string(assignmentName(options.assignment)));
@@ -257,6 +284,12 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
       levels[0].mesh = std::move(finest.mesh);
     }
     returnFreedMemory();  // what building the levels freed
+    if (terrain) {
+      writeQuantizedMeshLayer(levels, plan.max_zoom, globe, geoid ? &*geoid : nullptr, output, summary, progress);
+      summary.entry_file = "layer.json";
+      progress.note("report: not written for --format quantized-mesh (the check reads tilesets)");
+      return finish();
+    }
     progress.beginStage("assigning clusters to tiles", levels.size());
     std::vector<TileKey> finer_cluster_tiles, own_cluster_tiles;
     for (std::size_t l = 0; l < levels.size(); ++l) {
@@ -572,12 +605,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     summary.report_path = (std::filesystem::path(options.output_dir) / "report.html").string();
     progress.endStage();
   }
-  progress.throwIfCancelled();
-  progress.beginStage("moving the output into place", 0);
-  output.commit();
-  progress.endStage();
-  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return summary;
+  return finish();
 }
 
 }  // namespace terratiles

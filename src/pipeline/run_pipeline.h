@@ -21,6 +21,13 @@ enum class HeightReference {
   Ellipsoidal,  // heights already above the WGS84 ellipsoid: use as they are
 };
 
+// What a build writes: a 3D Tiles tileset of Draco GLBs, or a quantized-mesh-1.0 terrain layer
+// (src/pipeline/terrain_output.h) that CesiumJS takes as the globe's terrain.
+enum class OutputFormat {
+  Tileset,        // tileset.json and GLB tiles (the default)
+  QuantizedMesh,  // layer.json and {z}/{x}/{y}.terrain (the geographic scheme, clusters only)
+};
+
 enum class LodMethod {
   Clusters,  // the paper's method: greedy TIN, cluster levels, clusters assigned to web tiles
   Grid,      // a decimated pixel grid per zoom in the local pixel scheme (for comparison)
@@ -30,6 +37,7 @@ struct BuildOptions {
   std::vector<std::string> inputs;
   std::string output_dir;
   bool force = false;
+  OutputFormat format = OutputFormat::Tileset;
   LodMethod lod = LodMethod::Clusters;
   TileSchemeKind scheme = TileSchemeKind::WebMercator;  // clusters only
   Assignment assignment = Assignment::Merge;            // clusters only
@@ -111,6 +119,7 @@ struct BuildSummary {
   std::string output_dir;
   std::string generator;    // "terratiles <version>"
   std::string report_path;  // OUTDIR/report.html, or empty
+  std::string entry_file = "tileset.json";  // what a client opens: tileset.json or layer.json
   bool check_ran = false;
   bool check_ok = false;
   std::string crs_name;

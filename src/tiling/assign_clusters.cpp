@@ -416,13 +416,14 @@ TileBounds schemeBounds(const std::vector<std::array<double, 2>>& points) {
 }
 
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
-                   std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
+                   std::int32_t forced_max_zoom, std::int32_t clusters_per_tile, std::int32_t forced_min_zoom) {
   return planZooms(frame, schemeBounds(frame.toScheme(finest.vertices)), finest.triangleCount(), tile_triangles,
-                   forced_max_zoom, clusters_per_tile);
+                   forced_max_zoom, clusters_per_tile, forced_min_zoom);
 }
 
 ZoomPlan planZooms(const TileFrame& frame, const TileBounds& box, std::size_t finest_triangles,
-                   std::int32_t tile_triangles, std::int32_t forced_max_zoom, std::int32_t clusters_per_tile) {
+                   std::int32_t tile_triangles, std::int32_t forced_max_zoom, std::int32_t clusters_per_tile,
+                   std::int32_t forced_min_zoom) {
   if (tile_triangles < 64) {
     throw Error(ErrorCode::Usage, "--tile-triangles is " + std::to_string(tile_triangles) + "; expected at least 64");
   }
@@ -441,7 +442,7 @@ ZoomPlan planZooms(const TileFrame& frame, const TileBounds& box, std::size_t fi
       ++plan.max_zoom;
     }
   }
-  plan.min_zoom = std::min(fit_zoom, plan.max_zoom);
+  plan.min_zoom = std::min(forced_min_zoom >= 0 ? forced_min_zoom : fit_zoom, plan.max_zoom);
   for (std::int32_t zoom = plan.max_zoom; zoom > plan.min_zoom; --zoom) {
     plan.clusters_per_level.push_back(clusters_per_tile * static_cast<std::int32_t>(tilesAt(zoom)));
   }

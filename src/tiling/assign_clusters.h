@@ -143,15 +143,18 @@ struct ZoomPlan {
   std::vector<std::int32_t> clusters_per_level;
 };
 
-// min_zoom: the finest zoom at which the data spans at most two tiles (never above
-// max_zoom); max_zoom: the first zoom from there whose tiles over the data hold at most
+// min_zoom: the finest zoom at which the data spans at most two tiles (or `forced_min_zoom`
+// when >= 0: a terrain layer has a level for every zoom down to 0; never above max_zoom);
+// max_zoom: the first zoom from there whose tiles over the data hold at most
 // `tile_triangles` of the finest TIN's triangles each (or `forced_max_zoom` when >= 0).
 ZoomPlan planZooms(const TileFrame& frame, const TinMesh& finest, std::int32_t tile_triangles,
-                   std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4);
+                   std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4,
+                   std::int32_t forced_min_zoom = -1);
 // The same from the box of the finest TIN's vertices in scheme coordinates and its triangle
 // count (the build in blocks adds them up over its blocks).
 ZoomPlan planZooms(const TileFrame& frame, const TileBounds& data_box, std::size_t finest_triangles,
-                   std::int32_t tile_triangles, std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4);
+                   std::int32_t tile_triangles, std::int32_t forced_max_zoom, std::int32_t clusters_per_tile = 4,
+                   std::int32_t forced_min_zoom = -1);
 // The box of points in scheme coordinates (toScheme's), west, south, east, north.
 TileBounds schemeBounds(const std::vector<std::array<double, 2>>& points);
 

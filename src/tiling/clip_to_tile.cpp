@@ -283,6 +283,26 @@ TileBounds terrainTileBounds(const TerrainTileKey& key) {
           -180.0 + static_cast<double>(key.x + 1) * size, -90.0 + static_cast<double>(key.y + 1) * size};
 }
 
+std::size_t snapToTileSides(std::vector<GeodeticPoint>& vertices, std::int32_t zoom, double steps_per_tile) {
+  const double size = std::ldexp(180.0, -zoom);
+  const auto snap = [&](double& value, double origin, std::int64_t count) {
+    const double at = (value - origin) / size;
+    const double index = std::clamp(std::round(at), 0.0, static_cast<double>(count));
+    if (std::fabs(at - index) * steps_per_tile >= 0.5) return false;
+    const double side = origin + index * size;  // as terrainTileBounds computes it
+    if (value == side) return false;
+    value = side;
+    return true;
+  };
+  std::size_t moved = 0;
+  for (GeodeticPoint& p : vertices) {
+    bool changed = snap(p.lon_deg, -180.0, std::int64_t{2} << zoom);
+    changed = snap(p.lat_deg, -90.0, std::int64_t{1} << zoom) || changed;
+    moved += changed;
+  }
+  return moved;
+}
+
 std::map<TerrainTileKey, std::vector<std::uint32_t>> trianglesPerTerrainTile(const GeodeticMesh& mesh,
                                                                               std::int32_t zoom) {
   const double size = std::ldexp(180.0, -zoom);

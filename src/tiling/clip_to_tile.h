@@ -57,6 +57,12 @@ struct TerrainTileKey {
 };
 TileBounds terrainTileBounds(const TerrainTileKey& key);
 
+// Moves every vertex that lies within half a step of a tile side at `zoom` onto that side,
+// a step being the tile's size over `steps_per_tile` (quantized-mesh's 32767): such a vertex
+// would be quantised onto the side in one tile and have no counterpart in its neighbour; on
+// the side, it belongs to both (clipToTile). Returns how many moved.
+std::size_t snapToTileSides(std::vector<GeodeticPoint>& vertices, std::int32_t zoom, double steps_per_tile);
+
 // Per tile at `zoom` that a triangle's box of longitude and latitude meets (sides included):
 // those triangles, in mesh order.
 std::map<TerrainTileKey, std::vector<std::uint32_t>> trianglesPerTerrainTile(const GeodeticMesh& mesh,

@@ -64,29 +64,6 @@ RealTile realTile(double max_error_m, std::int32_t grid_step) {
   return tile;
 }
 
-// Runs tools/validators/decode_quantized_mesh.mjs (loaders.gl) on the files: one JSON object
-// per file.
-std::vector<nlohmann::json> decodeWithLoadersGl(const std::vector<std::string>& files) {
-  std::string command = "node '" + test::sourceDir() + "/tools/validators/decode_quantized_mesh.mjs'";
-  for (const std::string& file : files) command += " '" + file + "'";
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  REQUIRE(pipe);
-  std::string output;
-  std::array<char, 65536> buffer;
-  while (fgets(buffer.data(), buffer.size(), pipe)) output += buffer.data();
-  const int status = pclose(pipe);
-  REQUIRE_MESSAGE(status == 0,
-                  "the loaders.gl decoder failed (run the README test set-up): " << output.substr(0, 2000));
-  std::vector<nlohmann::json> decoded;
-  std::size_t start = 0;
-  while (start < output.size()) {
-    const std::size_t end = output.find('\n', start);
-    decoded.push_back(nlohmann::json::parse(output.substr(start, end - start)));
-    start = end == std::string::npos ? output.size() : end + 1;
-  }
-  return decoded;
-}
-
 void writeFile(const std::string& path, const std::vector<std::uint8_t>& bytes) {
   std::ofstream out(path, std::ios::binary);
   out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
@@ -279,7 +256,7 @@ TEST_CASE("quantized-mesh tiles of a real TIN decode with loaders.gl as written"
   CHECK(tin_gzip.size() < tin_bytes.size());
   writeFile(dir / "tin.terrain", tin_gzip);
   writeFile(dir / "grid.terrain", grid_bytes);
-  const auto decoded = decodeWithLoadersGl({dir / "tin.terrain", dir / "grid.terrain"});
+  const auto decoded = test::decodeQuantizedMeshFiles({dir / "tin.terrain", dir / "grid.terrain"});
   REQUIRE(decoded.size() == 2);
   CHECK(decoded[0]["gzip"] == true);
   CHECK(decoded[0]["bytes"].get<std::size_t>() == tin_bytes.size());

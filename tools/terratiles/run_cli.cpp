@@ -120,13 +120,15 @@ std::string humanBytes(std::size_t bytes) {
 void printJsonSummary(const BuildSummary& s, std::ostream& err) {
   nlohmann::json j;
   j["event"] = "summary";
-  j["tileset"] = s.output_dir + "/tileset.json";
+  j[s.entry_file == "layer.json" ? "layer" : "tileset"] = s.output_dir + "/" + s.entry_file;
   j["report"] = s.report_path;
   j["tiles"] = s.tiles;
   j["triangles"] = s.triangles;
   j["bytes"] = s.tile_bytes;        // the tiles
   j["bytes_written"] = s.bytes;     // every file, reports included
-  j["worst_error_m"] = s.worst_error_m;
+  const bool terrain = s.entry_file == "layer.json";
+  // A terrain layer's tiles are not measured yet: no figure rather than a zero.
+  j["worst_error_m"] = terrain ? nlohmann::json() : nlohmann::json(s.worst_error_m);
   j["seconds"] = s.seconds;
   if (!s.blocks.empty()) j["blocks"] = s.blocks;
   j["check"] = s.check_ran ? (s.check_ok ? "ok" : "failed") : "not run";
@@ -137,7 +139,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
   std::ostringstream text;
   text.imbue(std::locale::classic());
   text << std::fixed;
-  text << "terratiles: built " << s.output_dir << "/tileset.json\n";
+  text << "terratiles: built " << s.output_dir << "/" << s.entry_file << "\n";
   text << "  input    " << s.width << " x " << s.height << " px, " << std::setprecision(6)
        << s.pixel_size << " " << s.crs_name << ", heights " << std::setprecision(1)
        << s.min_height_m << " .. " << s.max_height_m << " m, centre " << std::setprecision(5)
@@ -145,6 +147,19 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
   if (!s.blocks.empty()) text << "  blocks   " << s.blocks << "\n";
   for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
+  if (s.entry_file == "layer.json") {
+    text << "  zoom  tiles   triangles  tile triangles        bytes  B/tri\n";
+    for (const ZoomSummary& z : s.zooms) {
+      text << "  " << std::setw(4) << z.zoom << std::setw(7) << z.tiles << std::setw(12) << z.triangles << std::setw(16)
+           << z.tile_triangles << std::setw(13) << z.bytes << std::setprecision(2) << std::setw(7)
+           << (z.tile_triangles ? static_cast<double>(z.bytes) / static_cast<double>(z.tile_triangles) : 0.0) << "\n";
+    }
+    text << "  total " << s.tiles << " tiles (gzip'd quantized-mesh, the whole globe at zoom 0, the fill the geoid "
+         << "surface), " << humanBytes(s.tile_bytes) << ", " << std::setprecision(2) << s.seconds << " s\n";
+    text << "  errors   not measured yet for --format quantized-mesh; no report\n";
+    err << text.str() << std::flush;
+    return;
+  }
   text << "  zoom clusters  tiles   triangles  redundancy        bytes  B/tri  step mm   max err m   rms err m  geomError m\n";
   std::size_t tile_triangles = 0;
   for (const ZoomSummary& z : s.zooms) {
@@ -786,6 +801,14 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   build_command->add_flag("-f,--force", build.force,
                           "Replace OUTDIR when it holds a previous output (tileset.json)");
   std::string lod_choice = "clusters", scheme_choice = "webmercator", assign_choice = "merge";
+  std::string format_choice = "tileset";
+  build_command
+      ->add_option("--format", format_choice,
+                   "What to write: tileset (3D Tiles: tileset.json and Draco GLB tiles) or quantized-mesh (a "
+                   "quantized-mesh-1.0 terrain layer, layer.json and gzip'd {z}/{x}/{y}.terrain tiles, that "
+                   "CesiumJS's CesiumTerrainProvider takes as the globe's terrain; the geographic scheme)")
+      ->check(CLI::IsMember({"tileset", "quantized-mesh"}))
+      ->capture_default_str();
   build_command
       ->add_option("--lod", lod_choice,
                    "Levels of detail: clusters (greedy TIN, cluster levels, clusters assigned to web tiles: the "
@@ -1148,6 +1171,11 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     build.simplifier = parseSimplifier(build_simplifier);
     build.tail_stop = parseTailStop(build_tail_stop);
     build.global_partition = build_partition == "global";
+    build.format = format_choice == "quantized-mesh" ? OutputFormat::QuantizedMesh : OutputFormat::Tileset;
+    // quantized-mesh tiles are the geographic quadtree's: its scheme unless one is asked for.
+    if (build.format == OutputFormat::QuantizedMesh && build_command->count("--scheme") == 0) {
+      scheme_choice = "geographic";
+    }
     build.scheme = parseTileSchemeKind(scheme_choice);
     build.assignment = parseAssignment(assign_choice);
     if (build_heights.heights == "ellipsoidal") {

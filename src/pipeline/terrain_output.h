@@ -1,0 +1,44 @@
+#pragma once
+// writeQuantizedMeshLayer: the cluster levels as a quantized-mesh-1.0 terrain layer that
+// CesiumJS's CesiumTerrainProvider takes as the globe's terrain (`terratiles build --format
+// quantized-mesh`; issue 17).
+//
+// Layout (the TMS geographic quadtree, EPSG:4326, as Cesium World Terrain's):
+//   layer.json          tilejson 2.1.0, format quantized-mesh-1.0, scheme tms, the tile URL
+//                       template, extensions ["octvertexnormals"] and `available`: per zoom,
+//                       the rectangles of tiles that exist
+//   {z}/{x}/{y}.terrain one gzip'd quantized-mesh tile (formats/quantized_mesh)
+//
+// Zoom z shows level max_zoom - z (level 0, the finest TIN, at max_zoom); the zooms coarser
+// than the coarsest level show the coarsest level. Each level's vertices are placed on the
+// globe as the tileset's are (DemOnGlobe: longitude, latitude, ellipsoidal height), its
+// normals from the whole level (shading continuous across tiles), then every tile the level
+// meets is cut from it (clipToTile: neighbours share their sides' vertices bit for bit) and
+// covered whole (fillTile: where the data is not, the geoid surface, height 0 above it, or
+// the ellipsoid without a geoid). Both zoom-0 tiles exist, so a client has terrain
+// everywhere; deeper, the tiles the data meets (and so their parents). Tiles in parallel,
+// written in a fixed order: the layer does not depend on the thread count.
+
+#include <cstdint>
+#include <vector>
+
+#include "formats/output_directory.h"
+#include "src/base/progress.h"
+#include "src/geo/dem_on_globe.h"
+#include "src/geo/geoid.h"
+#include "src/lod/build_levels.h"
+#include "src/pipeline/run_pipeline.h"
+
+namespace terratiles {
+
+// Fill grid: cells along each side of a tile, so that the straight triangles of a zoom-0 tile
+// (180 degrees a side) follow the ellipsoid to within about 8 km, a zoom-5 tile's to 8 m.
+inline constexpr std::int32_t kFillGridCells = 16;
+
+// levels[0] is the finest; zoom max_zoom shows it. Adds to summary (zooms, tiles, triangles,
+// bytes) and writes through `output`.
+void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
+                             const GeoidGrid* geoid, OutputDirectory& output, BuildSummary& summary,
+                             Progress& progress);
+
+}  // namespace terratiles

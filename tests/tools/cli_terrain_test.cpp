@@ -1,0 +1,170 @@
+// `terratiles build --format quantized-mesh` on a real raster: the layer a CesiumTerrainProvider
+// reads, every tile decoded by loaders.gl, and the seams between tiles.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+
+#include <nlohmann/json.hpp>
+
+#include "tests/test_support.h"
+
+using namespace terratiles;
+using test::runTerratiles;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+struct Key {
+  int z = 0;
+  long x = 0, y = 0;
+  auto operator<=>(const Key&) const = default;
+};
+
+// A decoded tile's vertices on one side (u or v at 0 or 32767) as (position along the side,
+// height) pairs: what must match the neighbour's.
+std::set<std::pair<int, int>> sideOf(const json& tile, int side) {
+  std::set<std::pair<int, int>> found;
+  const auto& u = tile["u"];
+  const auto& v = tile["v"];
+  const auto& h = tile["height"];
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    const int ui = u[i], vi = v[i];
+    const bool on = side == 0 ? ui == 0 : side == 1 ? vi == 0 : side == 2 ? ui == 32767 : vi == 32767;
+    if (on) found.insert({side % 2 == 0 ? vi : ui, h[i].get<int>()});
+  }
+  return found;
+}
+
+}  // namespace
+
+TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode and meet bit for bit") {
+  test::TempDir dir;
+  const std::string out = dir / "terrain";
+  const auto result = runTerratiles({"build", test::sharedData("srtm3_N57E011_4326.tif"), "-o", out, "--format",
+                                     "quantized-mesh", "--tin-max-error", "2", "-q"});
+  REQUIRE_MESSAGE(result.exit_code == 0, result.err);
+  std::ifstream layer_file(out + "/layer.json");
+  const json layer = json::parse(layer_file);
+  CHECK(layer["format"] == "quantized-mesh-1.0");
+  CHECK(layer["scheme"] == "tms");
+  CHECK(layer["projection"] == "EPSG:4326");
+  CHECK(layer["tiles"][0] == "{z}/{x}/{y}.terrain?v={version}");
+  const int max_zoom = layer["maxzoom"];
+  REQUIRE(layer["available"].size() == static_cast<std::size_t>(max_zoom) + 1);
+  CHECK(max_zoom >= 8);
+
+  // The tiles written are exactly those `available` lists; zoom 0 has both; every other tile's
+  // parent is there.
+  std::set<Key> available, written;
+  for (int z = 0; z <= max_zoom; ++z) {
+    for (const json& r : layer["available"][static_cast<std::size_t>(z)]) {
+      for (long y = r["startY"]; y <= r["endY"].get<long>(); ++y) {
+        for (long x = r["startX"]; x <= r["endX"].get<long>(); ++x) available.insert({z, x, y});
+      }
+    }
+  }
+  std::vector<std::string> files;
+  std::vector<Key> file_keys;
+  for (const auto& entry : fs::recursive_directory_iterator(out)) {
+    if (entry.path().extension() != ".terrain") continue;
+    const fs::path relative = fs::relative(entry.path(), out);
+    auto part = relative.begin();
+    const Key key{std::stoi(part->string()), std::stol((++part)->string()), std::stol((++part)->stem().string())};
+    written.insert(key);
+    files.push_back(entry.path().string());
+    file_keys.push_back(key);
+  }
+  CHECK(written == available);
+  CHECK(available.count({0, 0, 0}) == 1);
+  CHECK(available.count({0, 1, 0}) == 1);
+  std::size_t orphans = 0;
+  for (const Key& key : available) orphans += key.z > 0 && !available.count({key.z - 1, key.x / 2, key.y / 2});
+  CHECK(orphans == 0);
+
+  // Every tile decodes (gzip'd), covers its square exactly once with counter-clockwise
+  // triangles, lists exactly its side vertices as edges, and shares its zoom's height range.
+  const std::vector<json> decoded = test::decodeQuantizedMeshFiles(files);
+  std::map<Key, const json*> tiles;
+  std::map<int, std::pair<double, double>> range_of_zoom;
+  std::size_t folded = 0, folded_further = 0, triangles = 0, wrong_edges = 0, other_range = 0, not_covered = 0, no_normals = 0;
+  for (std::size_t i = 0; i < decoded.size(); ++i) {
+    const json& tile = decoded[i];
+    INFO(tile.value("file", std::string()));
+    REQUIRE_FALSE(tile.contains("error"));
+    CHECK(tile["gzip"] == true);
+    tiles[file_keys[i]] = &tile;
+    const auto& u = tile["u"];
+    const auto& v = tile["v"];
+    const auto& t = tile["triangles"];
+    std::int64_t area2 = 0;
+    triangles += t.size() / 3;
+    for (std::size_t k = 0; k < t.size(); k += 3) {
+      const std::size_t a = t[k], b = t[k + 1], c = t[k + 2];
+      const std::int64_t ua = u[a], va = v[a], ub = u[b], vb = v[b], uc = u[c], vc = v[c];
+      const std::int64_t cross = (ub - ua) * (vc - va) - (vb - va) * (uc - ua);
+      // Clockwise only by rounding: a sliver whose altitude is under one quantisation step
+      // (twice its area below its longest side) may fold; nothing folds further.
+      const double longest = std::max({std::hypot(ub - ua, vb - va), std::hypot(uc - ub, vc - vb),
+                                       std::hypot(ua - uc, va - vc)});
+      folded_further += cross < 0 && static_cast<double>(-cross) > longest;
+      folded += cross < 0;
+      area2 += cross;
+    }
+    not_covered += area2 != std::int64_t{2} * 32767 * 32767;
+    const char* names[] = {"west", "south", "east", "north"};
+    for (int side = 0; side < 4; ++side) {
+      std::set<std::size_t> listed, on_side;
+      for (const auto& index : tile[names[side]]) listed.insert(index.get<std::size_t>());
+      for (std::size_t k = 0; k < u.size(); ++k) {
+        const int ui = u[k], vi = v[k];
+        if (side == 0 ? ui == 0 : side == 1 ? vi == 0 : side == 2 ? ui == 32767 : vi == 32767) on_side.insert(k);
+      }
+      wrong_edges += listed != on_side;
+    }
+    const std::pair<double, double> range{tile["header"]["minHeight"], tile["header"]["maxHeight"]};
+    other_range += range_of_zoom.try_emplace(file_keys[i].z, range).first->second != range;
+    no_normals += tile["extensions"].empty() || tile["extensions"][0]["id"] != 1;
+  }
+  CHECK(folded_further == 0);
+  MESSAGE(folded << " of " << triangles << " triangles folded by rounding");
+  CHECK(not_covered == 0);
+  CHECK(wrong_edges == 0);
+  CHECK(other_range == 0);
+  CHECK(no_normals == 0);
+
+  // Neighbours of one zoom hold the same vertices on their common side (same quantised
+  // position and height against the same range: the same decoded bits in any client).
+  std::size_t sides = 0, mismatched = 0;
+  for (const auto& [key, tile] : tiles) {
+    for (const bool east : {true, false}) {
+      const auto other = tiles.find({key.z, key.x + (east ? 1 : 0), key.y + (east ? 0 : 1)});
+      if (other == tiles.end()) continue;
+      ++sides;
+      mismatched += sideOf(*tile, east ? 2 : 3) != sideOf(*other->second, east ? 0 : 1);
+    }
+  }
+  CHECK(sides >= 20);
+  CHECK(mismatched == 0);
+}
+
+TEST_CASE("build --format quantized-mesh refuses what it cannot write, with exit 2") {
+  test::TempDir dir;
+  for (const std::vector<std::string>& extra : std::vector<std::vector<std::string>>{
+           {"--scheme", "webmercator"}, {"--lod", "grid"}, {"--scheme", "geographic", "--implicit"}}) {
+    std::vector<std::string> args{"build", test::sharedData("srtm3_N57E011_4326.tif"), "-o", dir / "out",
+                                  "--format", "quantized-mesh"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const auto result = runTerratiles(args);
+    CHECK(result.exit_code == 2);
+    CHECK_MESSAGE(result.err.find("--format quantized-mesh takes the clusters' levels on the geographic scheme") !=
+                      std::string::npos,
+                  result.err);
+    CHECK_FALSE(fs::exists(dir / "out"));
+  }
+}
