@@ -5,6 +5,8 @@
 //
 // URL parameters:
 //   tileset=URL    tileset.json to load (default /data/tileset.json)
+//   terrain=URL    instead: a quantized-mesh layer.json, shown as the globe's terrain
+//                  (CesiumTerrainProvider) with the imagery draped on it
 //   sse=N          maximumScreenSpaceError (default 16)
 //   bv=1           show tile bounding volumes
 //   colorize=1     colour tiles randomly (debugColorizeTiles)
@@ -15,7 +17,8 @@
   'use strict';
 
   const params = new URLSearchParams(window.location.search);
-  const tilesetUrl = params.get('tileset') || '/data/tileset.json';
+  const terrainUrl = params.get('terrain');
+  const tilesetUrl = terrainUrl || params.get('tileset') || '/data/tileset.json';
   const maximumScreenSpaceError = Number(params.get('sse') || 16);
   const sceneTime = params.get('time') || '2024-06-21T10:00:00Z';
 
@@ -152,6 +155,7 @@
 
   // ---- per-frame bookkeeping -----------------------------------------------
   let tileset = null;
+  let terrainProvider = null;
   let zoomDone = false;
   const lastCamPos = new Cesium.Cartesian3();
   const lastCamDir = new Cesium.Cartesian3();
@@ -176,9 +180,10 @@
       !Cesium.Cartesian3.equalsEpsilon(cam.directionWC, lastCamDir, 1e-9);
     Cesium.Cartesian3.clone(cam.positionWC, lastCamPos);
     Cesium.Cartesian3.clone(cam.directionWC, lastCamDir);
-    if (tileset) {
-      status.allTilesLoaded = tileset.tilesLoaded;
-      status.stableFrames = !moved && tileset.tilesLoaded ? status.stableFrames + 1 : 0;
+    const loaded = tileset ? tileset.tilesLoaded : terrainProvider ? scene.globe.tilesLoaded : null;
+    if (loaded !== null) {
+      status.allTilesLoaded = loaded;
+      status.stableFrames = !moved && loaded ? status.stableFrames + 1 : 0;
       if (zoomDone && !status.ready && status.stableFrames >= 5) {
         status.ready = true;
         updateLegend(true);
@@ -200,7 +205,47 @@
     return { lon: deg(lonC), lat: deg((s + n) / 2), height: (minH + maxH) / 2 };
   }
 
+  // A quantized-mesh layer as the globe's terrain: tile failures counted, the view on the
+  // finest zoom's tiles (layer.json's last `available` ranges).
+  async function loadTerrain() {
+    try {
+      const resp = await fetch(terrainUrl, { cache: 'no-store' });
+      if (!resp.ok) throw new Error(`HTTP ${resp.status} for ${terrainUrl}`);
+      const layer = await resp.json();
+      terrainProvider = await Cesium.CesiumTerrainProvider.fromUrl(terrainUrl.replace(/layer\.json$/, ''), {
+        requestVertexNormals: true,
+      });
+      terrainProvider.errorEvent.addEventListener((err) => {
+        const where = err && err.level !== undefined ? `${err.level}/${err.x}/${err.y}` : terrainUrl;
+        status.failedTiles.push({ url: where, message: String((err && err.message) || err) });
+        console.error(`terratiles: terrain tile failed: ${where}`);
+        updateLegend(true);
+      });
+      viewer.terrainProvider = terrainProvider;
+      scene.globe.enableLighting = false;
+      window.terratilesApi.terrainProvider = terrainProvider;
+      const zoom = layer.available.length - 1;
+      const size = 180 / 2 ** zoom;
+      let w = 180, s = 90, e = -180, n = -90;
+      for (const r of layer.available[zoom]) {
+        w = Math.min(w, -180 + r.startX * size);
+        e = Math.max(e, -180 + (r.endX + 1) * size);
+        s = Math.min(s, -90 + r.startY * size);
+        n = Math.max(n, -90 + (r.endY + 1) * size);
+      }
+      status.region = { west: w, south: s, east: e, north: n };
+      status.center = { lon: (w + e) / 2, lat: (s + n) / 2, height: 0 };
+      viewer.camera.setView({ destination: Cesium.Rectangle.fromDegrees(w, s, e, n) });
+      zoomDone = true;
+    } catch (e) {
+      status.error = (e && e.message) || String(e);
+      console.error(`terratiles: failed to load ${terrainUrl}: ${status.error}`);
+    }
+    updateLegend(true);
+  }
+
   async function load() {
+    if (terrainUrl) return loadTerrain();
     try {
       // The raw JSON gives the root region (the tileset's own notion of its extent).
       const resp = await fetch(tilesetUrl, { cache: 'no-store' });
@@ -318,6 +363,14 @@
       } finally {
         scene.globe.show = globeShow;
       }
+    },
+    // Heights (m above the ellipsoid) of the terrain at [[lon, lat], ...] degrees, at its
+    // finest tiles (sampleTerrainMostDetailed); null where it has none.
+    async sampleTerrain(points) {
+      if (!terrainProvider) throw new Error('no terrain layer loaded (terrain=URL)');
+      const cartographics = points.map(([lon, lat]) => Cesium.Cartographic.fromDegrees(lon, lat));
+      const sampled = await Cesium.sampleTerrainMostDetailed(terrainProvider, cartographics);
+      return sampled.map((c) => (Number.isFinite(c.height) ? c.height : null));
     },
     // Forget "rendered"/"loaded" tallies (e.g. before a new camera sweep).
     resetCounters() {

@@ -6,7 +6,8 @@
 // Serves, on 127.0.0.1 only:
 //   /            -> samples/viewer/index.html and main.js
 //   /cesium/...  -> samples/viewer/node_modules/cesium/Build/Cesium/...
-//   /data/...    -> OUTDIR/... (the terratiles output: tileset.json, *.glb)
+//   /data/...    -> OUTDIR/... (the terratiles output: tileset.json and *.glb, or layer.json
+//                   and gzip'd *.terrain, sent with Content-Encoding: gzip)
 //
 // The module can also be imported: `startServer({ outDir, port })` resolves
 // to `{ server, port, url, close() }` (port 0 picks a free port).
@@ -39,6 +40,7 @@ const MIME = {
   '.pnts': 'application/octet-stream',
   '.cmpt': 'application/octet-stream',
   '.subtree': 'application/octet-stream',
+  '.terrain': 'application/vnd.quantized-mesh',
   '.bin': 'application/octet-stream',
   '.png': 'image/png',
   '.jpg': 'image/jpeg',
@@ -78,6 +80,19 @@ function send(res, status, body, headers = {}) {
   res.end(body);
 }
 
+function isGzip(file) {
+  const head = Buffer.alloc(2);
+  let fd = null;
+  try {
+    fd = fs.openSync(file, 'r');
+    return fs.readSync(fd, head, 0, 2, 0) === 2 && head[0] === 0x1f && head[1] === 0x8b;
+  } catch {
+    return false;
+  } finally {
+    if (fd !== null) fs.closeSync(fd);
+  }
+}
+
 function sendFile(req, res, file, { noCache = false } = {}) {
   fs.stat(file, (err, st) => {
     if (err || !st.isFile()) {
@@ -90,6 +105,8 @@ function sendFile(req, res, file, { noCache = false } = {}) {
       'Cache-Control': noCache ? 'no-store' : 'public, max-age=3600',
       'Access-Control-Allow-Origin': '*',
     };
+    // quantized-mesh tiles are stored gzip'd: the client inflates them.
+    if (path.extname(file) === '.terrain' && isGzip(file)) headers['Content-Encoding'] = 'gzip';
     res.writeHead(200, headers);
     if (req.method === 'HEAD') {
       res.end();
@@ -167,7 +184,10 @@ export function startServer({ outDir, port = DEFAULT_PORT, log = false }) {
         server,
         port: actualPort,
         url,
-        viewerUrl: `${url}?tileset=/data/tileset.json`,
+        // A terrain layer (layer.json) is shown as the globe's terrain, a tileset on it.
+        viewerUrl: fs.existsSync(path.join(root, 'layer.json'))
+          ? `${url}?terrain=/data/layer.json`
+          : `${url}?tileset=/data/tileset.json`,
         close: () =>
           new Promise((r) => {
             server.closeAllConnections?.();

@@ -7,10 +7,13 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <random>
 #include <set>
 
 #include <nlohmann/json.hpp>
 
+#include "formats/dem/read_dem.h"
+#include "formats/geoid/read_geoid.h"
 #include "tests/test_support.h"
 
 using namespace terratiles;
@@ -41,14 +44,20 @@ std::set<std::pair<int, int>> sideOf(const json& tile, int side) {
   return found;
 }
 
-}  // namespace
-
-TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode and meet bit for bit") {
-  test::TempDir dir;
+// SRTM N57E011 built as a quantized-mesh layer at 2 m into dir/terrain.
+std::string buildLayer(const test::TempDir& dir) {
   const std::string out = dir / "terrain";
   const auto result = runTerratiles({"build", test::sharedData("srtm3_N57E011_4326.tif"), "-o", out, "--format",
                                      "quantized-mesh", "--tin-max-error", "2", "-q"});
   REQUIRE_MESSAGE(result.exit_code == 0, result.err);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode and meet bit for bit") {
+  test::TempDir dir;
+  const std::string out = buildLayer(dir);
   std::ifstream layer_file(out + "/layer.json");
   const json layer = json::parse(layer_file);
   CHECK(layer["format"] == "quantized-mesh-1.0");
@@ -167,4 +176,63 @@ TEST_CASE("build --format quantized-mesh refuses what it cannot write, with exit
                   result.err);
     CHECK_FALSE(fs::exists(dir / "out"));
   }
+}
+
+TEST_CASE("CesiumJS takes the quantized-mesh layer as its terrain: no tile fails, heights are the DEM's") {
+  // SRTM N57E011 at 2 m: CesiumTerrainProvider in headless chromium (samples/viewer,
+  // tools/render_check/terrain_check.mjs) with NaturalEarthII draped, then
+  // sampleTerrainMostDetailed at 200 random valid pixels against the DEM height plus EGM96:
+  // within the finest TIN's bound (2 m, measured on the triangles as drawn) plus 5 cm for the
+  // quantisation of heights (range / 32767, under 1 cm here) and positions, and the straight
+  // triangles' sag the client's interpolation in longitude and latitude does not follow.
+  test::TempDir dir;
+  const std::string out = buildLayer(dir);
+  const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
+  const GeoidGrid geoid = readGeoidGrid("/usr/share/proj/egm96_15.gtx");
+  std::mt19937 random(17);
+  std::uniform_int_distribution<int> col(0, dem.width - 1), row(0, dem.height - 1);
+  json points = json::array();
+  std::vector<double> expected;
+  while (expected.size() < 200) {
+    const int c = col(random), r = row(random);
+    if (!dem.isValid(c, r)) continue;
+    const CrsPoint at = dem.pixelCentre(c, r);
+    points.push_back({at.x, at.y});
+    expected.push_back(dem.heightAt(c, r) + geoid.undulationAt(at.x, at.y).value());
+  }
+  {
+    std::ofstream(dir / "points.json") << points.dump();
+  }
+  const fs::path artifacts = fs::path(TERRATILES_BINARY).parent_path() / "test-artifacts";
+  fs::create_directories(artifacts);
+  const std::string command = "node '" + test::sourceDir() + "/tools/render_check/terrain_check.mjs' '" + out +
+                              "' --points '" + dir / "points.json" + "' --json '" + dir / "result.json" +
+                              "' --screenshot '" + (artifacts / "srtm_terrain.png").string() + "' > /dev/null";
+  REQUIRE_MESSAGE(std::system(command.c_str()) == 0, "terrain_check.mjs failed (run the README test set-up)");
+  std::ifstream result_file(dir / "result.json");
+  const json result = json::parse(result_file);
+  json summary = result;
+  summary.erase("heights");
+  INFO(summary.dump());
+  REQUIRE(result["ready"] == true);
+  CHECK(result["error"].is_null());
+  CHECK(result["failedTiles"].empty());
+  CHECK(result["consoleErrors"].empty());
+  CHECK(result["httpErrors"].empty());
+  CHECK(result["renderError"].is_null());
+  CHECK(result["polyline"]["show"] == true);
+  CHECK(result["polyline"]["frames"].get<int>() >= 30);
+  REQUIRE(result["heights"].size() == expected.size());
+  std::size_t missing = 0;
+  double worst = 0;
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    if (result["heights"][i].is_null()) {
+      ++missing;
+      continue;
+    }
+    worst = std::max(worst, std::fabs(result["heights"][i].get<double>() - expected[i]));
+  }
+  CHECK(missing == 0);
+  MESSAGE("largest difference to DEM + EGM96 at 200 pixels: " << worst << " m");
+  CHECK(worst <= 2.05);
 }

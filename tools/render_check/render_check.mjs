@@ -17,6 +17,8 @@ import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 
+import { launchChromium } from './headless_chromium.mjs';
+
 const HERE = path.dirname(fileURLToPath(import.meta.url));
 const REPO = path.resolve(HERE, '..', '..');
 const SERVE_MJS = path.join(REPO, 'samples', 'viewer', 'serve.mjs');
@@ -379,24 +381,11 @@ async function main() {
     const url = `${server.url}?tileset=/data/tileset.json&sse=${opts.sse}${opts.params ? '&' + opts.params : ''}`;
     log(`serving ${outDir} at ${server.url}`);
 
-    context = await chromium.launchPersistentContext(userDataDir, {
+    context = await launchChromium(chromium, {
       executablePath: opts.chromium,
-      headless: true,
-      chromiumSandbox: false,
-      args: [
-        '--headless',
-        '--no-sandbox',
-        '--use-angle=swiftshader',
-        '--enable-unsafe-swiftshader',
-        '--ignore-gpu-blocklist',
-        '--disable-background-networking',
-        '--disable-component-update',
-        '--disable-dev-shm-usage',
-        '--no-first-run',
-      ],
-      viewport: { width: opts.width, height: opts.height },
-      deviceScaleFactor: 1,
-      timeout: 60000,
+      userDataDir,
+      width: opts.width,
+      height: opts.height,
     });
     result.browser = context.browser() ? context.browser().version() : null;
     const page = context.pages()[0] || (await context.newPage());
