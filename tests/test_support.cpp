@@ -6,6 +6,9 @@
 #include <stdlib.h>
 
 #include <algorithm>
+#include <random>
+#include <numbers>
+#include <cmath>
 #include <array>
 #include <map>
 #include <cstdio>
@@ -192,6 +195,51 @@ std::vector<nlohmann::json> decodeQuantizedMeshFiles(const std::vector<std::stri
   }
   REQUIRE(decoded.size() == files.size());
   return decoded;
+}
+
+namespace {
+// CesiumJS's EllipsoidalOccluder.isScaledSpacePointVisible, seen from `camera` (scaled).
+bool visibleFrom(const EcefPoint& camera, const EcefPoint& point) {
+  const double vh_squared = camera.x * camera.x + camera.y * camera.y + camera.z * camera.z - 1;
+  const EcefPoint vt{point.x - camera.x, point.y - camera.y, point.z - camera.z};
+  const double vt_dot_vc = -(vt.x * camera.x + vt.y * camera.y + vt.z * camera.z);
+  const double vt_squared = vt.x * vt.x + vt.y * vt.y + vt.z * vt.z;
+  const bool occluded = vh_squared < 0 ? vt_dot_vc > 0
+                                       : vt_dot_vc > vh_squared && vt_dot_vc * vt_dot_vc / vt_squared > vh_squared;
+  return !occluded;
+}
+}  // namespace
+
+HorizonCulling cullByHorizonPoint(const EcefPoint& occlusion, const std::vector<EcefPoint>& vertices) {
+  std::vector<EcefPoint> scaled;
+  for (const EcefPoint& p : vertices) scaled.push_back({p.x / 6378137.0, p.y / 6378137.0, p.z / 6356752.3142451793});
+  const double length = std::hypot(occlusion.x, occlusion.y, occlusion.z);
+  const std::array<double, 3> d{occlusion.x / length, occlusion.y / length, occlusion.z / length};
+  const std::array<double, 3> a =
+      std::fabs(d[2]) < 0.9 ? std::array<double, 3>{0, 0, 1} : std::array<double, 3>{1, 0, 0};
+  std::array<double, 3> e1{d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]};
+  const double n = std::hypot(e1[0], e1[1], e1[2]);
+  e1 = {e1[0] / n, e1[1] / n, e1[2] / n};
+  const std::array<double, 3> e2{d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2], d[0] * e1[1] - d[1] * e1[0]};
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> up(1.0 + 1.0 / 6378137.0, 3.0), turn(0, 2 * std::numbers::pi),
+      off(-2 * std::numbers::pi / 180, 2 * std::numbers::pi / 180);
+  HorizonCulling result;
+  for (int c = 0; c < 4000; ++c) {
+    const double radius = up(random), azimuth = turn(random), theta = std::acos(1 / radius) + off(random);
+    const double s = std::sin(theta), k = std::cos(theta);
+    EcefPoint camera;
+    camera.x = radius * (k * d[0] + s * (std::cos(azimuth) * e1[0] + std::sin(azimuth) * e2[0]));
+    camera.y = radius * (k * d[1] + s * (std::cos(azimuth) * e1[1] + std::sin(azimuth) * e2[1]));
+    camera.z = radius * (k * d[2] + s * (std::cos(azimuth) * e1[2] + std::sin(azimuth) * e2[2]));
+    if (visibleFrom(camera, occlusion)) {
+      ++result.cameras_seeing;
+      continue;
+    }
+    ++result.cameras_culling;
+    for (const EcefPoint& p : scaled) result.vertices_seen_when_culled += visibleFrom(camera, p);
+  }
+  return result;
 }
 
 std::set<std::array<double, 6>> checkStitchedTin(const std::string& path, const DemGrid& dem, double bound_m,

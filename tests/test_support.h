@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "src/dem/dem_grid.h"
+#include "src/geo/crs_transform.h"
 #include "src/pipeline/check_output.h"
 #include "src/tin/measure_tin.h"
 
@@ -98,5 +99,18 @@ GltfValidation validateGltfTree(const std::string& dir);
 // npm @loaders.gl/terrain from the test set-up): one JSON object per file, in order (see the
 // script). REQUIREs that the decoder ran and decoded every file.
 std::vector<nlohmann::json> decodeQuantizedMeshFiles(const std::vector<std::string>& files);
+
+// A quantized-mesh horizon occlusion point (ellipsoid-scaled) against the vertices it stands
+// for (ECEF): from 4000 cameras that see the vertices near their horizon (1 m to 3 Earth
+// radii up, from 2 degrees nearer to 2 degrees farther than the horizon seen from over the
+// point, all round it), how many see the point, how many cannot (CesiumJS's
+// EllipsoidalOccluder.isScaledSpacePointVisible), and how many vertices the latter see anyway
+// (0 for a sound point).
+struct HorizonCulling {
+  std::size_t cameras_seeing = 0;
+  std::size_t cameras_culling = 0;
+  std::size_t vertices_seen_when_culled = 0;
+};
+HorizonCulling cullByHorizonPoint(const EcefPoint& occlusion_point, const std::vector<EcefPoint>& vertices);
 
 }  // namespace terratiles::test

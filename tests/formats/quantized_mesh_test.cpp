@@ -69,17 +69,6 @@ void writeFile(const std::string& path, const std::vector<std::uint8_t>& bytes) 
   out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
 }
 
-// CesiumJS's EllipsoidalOccluder.isScaledSpacePointVisible, seen from `camera` (scaled).
-bool visibleFrom(const EcefPoint& camera, const EcefPoint& point) {
-  const double vh_squared = camera.x * camera.x + camera.y * camera.y + camera.z * camera.z - 1;
-  const EcefPoint vt{point.x - camera.x, point.y - camera.y, point.z - camera.z};
-  const double vt_dot_vc = -(vt.x * camera.x + vt.y * camera.y + vt.z * camera.z);
-  const double vt_squared = vt.x * vt.x + vt.y * vt.y + vt.z * vt.z;
-  const bool occluded = vh_squared < 0 ? vt_dot_vc > 0
-                                       : vt_dot_vc > vh_squared && vt_dot_vc * vt_dot_vc / vt_squared > vh_squared;
-  return !occluded;
-}
-
 // CesiumJS's AttributeCompression.octDecodeInRange(x, y, 255).
 std::array<double, 3> octDecode(int x, int y) {
   double ox = x / 255.0 * 2 - 1, oy = y / 255.0 * 2 - 1;
@@ -175,10 +164,8 @@ void checkDecoded(const nlohmann::json& got, const RealTile& tile, const Decoded
     farthest = std::max(farthest, std::hypot(p.x - centre.x, p.y - centre.y, p.z - centre.z));
   }
   CHECK(farthest <= header["boundingSphereRadius"].get<double>());
-  // Horizon culling: from any camera that cannot see the tile's occlusion point, no vertex is
-  // in view either. The cameras that tell are those that see the tile near their horizon: at
-  // 1 m to 3 Earth radii up, between 2 degrees nearer and 2 degrees farther than the horizon
-  // from over the tile's middle, all round it. Tested on the sides' vertices and every 50th.
+  // Horizon culling: from no camera that cannot see the occlusion point is a vertex in view
+  // (tested on the sides' vertices and every 50th).
   const EcefPoint occlusion{header["horizonOcclusionPointX"].get<double>(),
                             header["horizonOcclusionPointY"].get<double>(),
                             header["horizonOcclusionPointZ"].get<double>()};
@@ -186,40 +173,13 @@ void checkDecoded(const nlohmann::json& got, const RealTile& tile, const Decoded
   for (std::size_t i = 0; i < count; ++i) {
     const auto& q = written.quantized[i];
     if (i % 50 == 0 || q[0] == 0 || q[1] == 0 || q[0] == kQuantizedMax || q[1] == kQuantizedMax) {
-      tested.push_back({ecef[i].x / 6378137.0, ecef[i].y / 6378137.0, ecef[i].z / 6356752.3142451793});
+      tested.push_back(ecef[i]);
     }
   }
-  const double length = std::hypot(occlusion.x, occlusion.y, occlusion.z);
-  const std::array<double, 3> d{occlusion.x / length, occlusion.y / length, occlusion.z / length};
-  const std::array<double, 3> e1 = [&] {  // perpendicular to d
-    const std::array<double, 3> a =
-        std::fabs(d[2]) < 0.9 ? std::array<double, 3>{0, 0, 1} : std::array<double, 3>{1, 0, 0};
-    std::array<double, 3> c{d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]};
-    const double n = std::hypot(c[0], c[1], c[2]);
-    return std::array<double, 3>{c[0] / n, c[1] / n, c[2] / n};
-  }();
-  const std::array<double, 3> e2{d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2], d[0] * e1[1] - d[1] * e1[0]};
-  std::mt19937 random(7);
-  std::uniform_real_distribution<double> up(1.0 + 1.0 / 6378137.0, 3.0), turn(0, 2 * std::numbers::pi),
-      off(-2 * std::numbers::pi / 180, 2 * std::numbers::pi / 180);
-  std::size_t cameras_culling = 0, cameras_seeing = 0, vertices_seen_when_culled = 0;
-  for (int c = 0; c < 4000; ++c) {
-    const double radius = up(random), azimuth = turn(random), theta = std::acos(1 / radius) + off(random);
-    const double s = std::sin(theta), k = std::cos(theta);
-    EcefPoint camera;
-    camera.x = radius * (k * d[0] + s * (std::cos(azimuth) * e1[0] + std::sin(azimuth) * e2[0]));
-    camera.y = radius * (k * d[1] + s * (std::cos(azimuth) * e1[1] + std::sin(azimuth) * e2[1]));
-    camera.z = radius * (k * d[2] + s * (std::cos(azimuth) * e1[2] + std::sin(azimuth) * e2[2]));
-    if (visibleFrom(camera, occlusion)) {
-      ++cameras_seeing;
-      continue;
-    }
-    ++cameras_culling;
-    for (const EcefPoint& p : tested) vertices_seen_when_culled += visibleFrom(camera, p);
-  }
-  CHECK(cameras_culling > 1000);
-  CHECK(cameras_seeing > 1000);
-  CHECK(vertices_seen_when_culled == 0);
+  const test::HorizonCulling culling = test::cullByHorizonPoint(occlusion, tested);
+  CHECK(culling.cameras_culling > 1000);
+  CHECK(culling.cameras_seeing > 1000);
+  CHECK(culling.vertices_seen_when_culled == 0);
   // Normals: within the 8-bit octahedron's precision (about 1 degree) of the given ones.
   REQUIRE(got["normals"].size() == 2 * count);
   double worst_degrees = 0;

@@ -14,6 +14,8 @@
 
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
+#include "formats/quantized_mesh/write_quantized_mesh.h"
+#include "src/geo/crs_transform.h"
 #include "tests/test_support.h"
 
 using namespace terratiles;
@@ -51,6 +53,72 @@ std::string buildLayer(const test::TempDir& dir) {
                                      "quantized-mesh", "--tin-max-error", "2", "-q"});
   REQUIRE_MESSAGE(result.exit_code == 0, result.err);
   return out;
+}
+
+// CesiumJS (CesiumTerrainProvider in headless chromium through samples/viewer and
+// tools/render_check/terrain_check.mjs, NaturalEarthII draped) takes the layer built from
+// `raster` with `build_args` as its terrain: no tile fails, a clampToGround polyline renders,
+// and sampleTerrainMostDetailed at 200 random valid pixels gives the DEM height plus the
+// geoid within `bound_m`. A screenshot goes to test-artifacts/`name`.png.
+void checkInCesium(const std::string& raster, const std::vector<std::string>& build_args, const std::string& geoid_path,
+                   double bound_m, const std::string& name) {
+  test::TempDir dir;
+  const std::string out = dir / "terrain";
+  std::vector<std::string> args{"build", raster, "-o", out, "--format", "quantized-mesh", "-q"};
+  args.insert(args.end(), build_args.begin(), build_args.end());
+  const auto built = runTerratiles(args);
+  REQUIRE_MESSAGE(built.exit_code == 0, built.err);
+  const DemGrid dem = readDem({raster});
+  const GeoidGrid geoid = readGeoidGrid(geoid_path);
+  const CrsToWgs84 to_wgs84(dem.crs_wkt);
+  std::mt19937 random(17);
+  std::uniform_int_distribution<int> col(0, dem.width - 1), row(0, dem.height - 1);
+  json points = json::array();
+  std::vector<double> expected;
+  while (expected.size() < 200) {
+    const int c = col(random), r = row(random);
+    if (!dem.isValid(c, r)) continue;
+    const CrsPoint at = dem.pixelCentre(c, r);
+    GeodeticPoint place;
+    to_wgs84.transform({&at, 1}, {&place, 1});
+    points.push_back({place.lon_deg, place.lat_deg});
+    expected.push_back(dem.heightAt(c, r) + geoid.undulationAt(place.lon_deg, place.lat_deg).value());
+  }
+  {
+    std::ofstream(dir / "points.json") << points.dump();
+  }
+  const fs::path artifacts = fs::path(TERRATILES_BINARY).parent_path() / "test-artifacts";
+  fs::create_directories(artifacts);
+  const std::string command = "node '" + test::sourceDir() + "/tools/render_check/terrain_check.mjs' '" + out +
+                              "' --points '" + dir / "points.json" + "' --json '" + dir / "result.json" +
+                              "' --screenshot '" + (artifacts / (name + ".png")).string() + "' > /dev/null";
+  REQUIRE_MESSAGE(std::system(command.c_str()) == 0, "terrain_check.mjs failed (run the README test set-up)");
+  std::ifstream result_file(dir / "result.json");
+  const json result = json::parse(result_file);
+  json summary = result;
+  summary.erase("heights");
+  INFO(summary.dump());
+  REQUIRE(result["ready"] == true);
+  CHECK(result["error"].is_null());
+  CHECK(result["failedTiles"].empty());
+  CHECK(result["consoleErrors"].empty());
+  CHECK(result["httpErrors"].empty());
+  CHECK(result["renderError"].is_null());
+  CHECK(result["polyline"]["show"] == true);
+  CHECK(result["polyline"]["frames"].get<int>() >= 30);
+  REQUIRE(result["heights"].size() == expected.size());
+  std::size_t missing = 0;
+  double worst = 0;
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    if (result["heights"][i].is_null()) {
+      ++missing;
+      continue;
+    }
+    worst = std::max(worst, std::fabs(result["heights"][i].get<double>() - expected[i]));
+  }
+  CHECK(missing == 0);
+  MESSAGE(name << ": largest difference to DEM + geoid at 200 pixels: " << worst << " m");
+  CHECK(worst <= bound_m);
 }
 
 }  // namespace
@@ -101,6 +169,7 @@ TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode
   const std::vector<json> decoded = test::decodeQuantizedMeshFiles(files);
   std::map<Key, const json*> tiles;
   std::map<int, std::pair<double, double>> range_of_zoom;
+  std::size_t outside_sphere = 0, seen_when_culled = 0, far_points = 0, far_points_beyond_zoom_1 = 0;
   std::size_t folded = 0, folded_further = 0, triangles = 0, wrong_edges = 0, other_range = 0, not_covered = 0, no_normals = 0;
   for (std::size_t i = 0; i < decoded.size(); ++i) {
     const json& tile = decoded[i];
@@ -139,7 +208,41 @@ TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode
     const std::pair<double, double> range{tile["header"]["minHeight"], tile["header"]["maxHeight"]};
     other_range += range_of_zoom.try_emplace(file_keys[i].z, range).first->second != range;
     no_normals += tile["extensions"].empty() || tile["extensions"][0]["id"] != 1;
+    // The header holds the vertices as decoded: the bounding sphere all of them, the horizon
+    // occlusion point culls none that a camera could see (where the tile is small enough for
+    // one: a zoom-0 or zoom-1 tile gets a point far out instead).
+    const json& header = tile["header"];
+    const Key& key = file_keys[i];
+    const TileBounds bounds = terrainTileBounds({key.z, key.x, key.y});
+    std::vector<GeodeticPoint> positions;
+    for (std::size_t k = 0; k < u.size(); ++k) {
+      positions.push_back(decodedPosition(bounds, header["minHeight"].get<float>(), header["maxHeight"].get<float>(),
+                                          {u[k].get<std::uint16_t>(), v[k].get<std::uint16_t>(),
+                                           tile["height"][k].get<std::uint16_t>()}));
+    }
+    std::vector<EcefPoint> ecef(positions.size());
+    geodeticToEcef(positions, ecef);
+    const EcefPoint centre{header["boundingSphereCenterX"], header["boundingSphereCenterY"],
+                           header["boundingSphereCenterZ"]};
+    for (const EcefPoint& p : ecef) {
+      outside_sphere += std::hypot(p.x - centre.x, p.y - centre.y, p.z - centre.z) >
+                        header["boundingSphereRadius"].get<double>();
+    }
+    const EcefPoint occlusion{header["horizonOcclusionPointX"], header["horizonOcclusionPointY"],
+                              header["horizonOcclusionPointZ"]};
+    if (std::hypot(occlusion.x, occlusion.y, occlusion.z) > 100) {
+      far_points += 1;
+      far_points_beyond_zoom_1 += key.z > 1;
+      continue;
+    }
+    std::vector<EcefPoint> tested;
+    for (std::size_t k = 0; k < ecef.size(); k += 7) tested.push_back(ecef[k]);
+    seen_when_culled += test::cullByHorizonPoint(occlusion, tested).vertices_seen_when_culled;
   }
+  CHECK(outside_sphere == 0);
+  CHECK(seen_when_culled == 0);
+  CHECK(far_points_beyond_zoom_1 == 0);
+  MESSAGE(far_points << " tiles with the far occlusion point");
   CHECK(folded_further == 0);
   MESSAGE(folded << " of " << triangles << " triangles folded by rounding");
   CHECK(not_covered == 0);
@@ -178,61 +281,14 @@ TEST_CASE("build --format quantized-mesh refuses what it cannot write, with exit
   }
 }
 
-TEST_CASE("CesiumJS takes the quantized-mesh layer as its terrain: no tile fails, heights are the DEM's") {
-  // SRTM N57E011 at 2 m: CesiumTerrainProvider in headless chromium (samples/viewer,
-  // tools/render_check/terrain_check.mjs) with NaturalEarthII draped, then
-  // sampleTerrainMostDetailed at 200 random valid pixels against the DEM height plus EGM96:
-  // within the finest TIN's bound (2 m, measured on the triangles as drawn) plus 5 cm for the
-  // quantisation of heights (range / 32767, under 1 cm here) and positions, and the straight
-  // triangles' sag the client's interpolation in longitude and latitude does not follow.
-  test::TempDir dir;
-  const std::string out = buildLayer(dir);
-  const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
-  const GeoidGrid geoid = readGeoidGrid("/usr/share/proj/egm96_15.gtx");
-  std::mt19937 random(17);
-  std::uniform_int_distribution<int> col(0, dem.width - 1), row(0, dem.height - 1);
-  json points = json::array();
-  std::vector<double> expected;
-  while (expected.size() < 200) {
-    const int c = col(random), r = row(random);
-    if (!dem.isValid(c, r)) continue;
-    const CrsPoint at = dem.pixelCentre(c, r);
-    points.push_back({at.x, at.y});
-    expected.push_back(dem.heightAt(c, r) + geoid.undulationAt(at.x, at.y).value());
-  }
-  {
-    std::ofstream(dir / "points.json") << points.dump();
-  }
-  const fs::path artifacts = fs::path(TERRATILES_BINARY).parent_path() / "test-artifacts";
-  fs::create_directories(artifacts);
-  const std::string command = "node '" + test::sourceDir() + "/tools/render_check/terrain_check.mjs' '" + out +
-                              "' --points '" + dir / "points.json" + "' --json '" + dir / "result.json" +
-                              "' --screenshot '" + (artifacts / "srtm_terrain.png").string() + "' > /dev/null";
-  REQUIRE_MESSAGE(std::system(command.c_str()) == 0, "terrain_check.mjs failed (run the README test set-up)");
-  std::ifstream result_file(dir / "result.json");
-  const json result = json::parse(result_file);
-  json summary = result;
-  summary.erase("heights");
-  INFO(summary.dump());
-  REQUIRE(result["ready"] == true);
-  CHECK(result["error"].is_null());
-  CHECK(result["failedTiles"].empty());
-  CHECK(result["consoleErrors"].empty());
-  CHECK(result["httpErrors"].empty());
-  CHECK(result["renderError"].is_null());
-  CHECK(result["polyline"]["show"] == true);
-  CHECK(result["polyline"]["frames"].get<int>() >= 30);
-  REQUIRE(result["heights"].size() == expected.size());
-  std::size_t missing = 0;
-  double worst = 0;
-  for (std::size_t i = 0; i < expected.size(); ++i) {
-    if (result["heights"][i].is_null()) {
-      ++missing;
-      continue;
-    }
-    worst = std::max(worst, std::fabs(result["heights"][i].get<double>() - expected[i]));
-  }
-  CHECK(missing == 0);
-  MESSAGE("largest difference to DEM + EGM96 at 200 pixels: " << worst << " m");
-  CHECK(worst <= 2.05);
+TEST_CASE("CesiumJS takes the quantized-mesh layers of SRTM N57E011 and Interlaken as its terrain") {
+  // The bound: the finest TIN's (measured on the triangles as drawn) plus 5 cm for the
+  // quantisation of heights (range / 32767: under 1 cm on N57E011, 5 cm at Interlaken's zoom
+  // 12) and positions, and the straight triangles' sag, which a client's interpolation in
+  // longitude and latitude does not follow.
+  checkInCesium(test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"}, "/usr/share/proj/egm96_15.gtx",
+                2.05, "srtm_terrain");
+  const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
+  checkInCesium(test::sharedData("ch_dhm25_interlaken_25m_2056.tif"), {"--tin-max-error", "1", "--geoid", chgeo},
+                chgeo, 1.05, "interlaken_terrain");
 }
