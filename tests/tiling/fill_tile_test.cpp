@@ -60,8 +60,9 @@ void checkFilled(const TerrainTileMesh& filled, const TerrainTileMesh& data,
     if (runs.count({edge.second, edge.first})) continue;
     const GeodeticPoint& a = filled.vertices[edge.first];
     const GeodeticPoint& b = filled.vertices[edge.second];
-    const bool on_side = (a.lon_deg == r.west && b.lon_deg == r.west) || (a.lon_deg == r.east && b.lon_deg == r.east) ||
-                         (a.lat_deg == r.south && b.lat_deg == r.south) || (a.lat_deg == r.north && b.lat_deg == r.north);
+    const bool on_side =
+        (a.lon_deg == r.west && b.lon_deg == r.west) || (a.lon_deg == r.east && b.lon_deg == r.east) ||
+        (a.lat_deg == r.south && b.lat_deg == r.south) || (a.lat_deg == r.north && b.lat_deg == r.north);
     open_inside += !on_side;
   }
   CHECK(twice_one_way == 0);

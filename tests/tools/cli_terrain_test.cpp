@@ -170,7 +170,8 @@ TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode
   std::map<Key, const json*> tiles;
   std::map<int, std::pair<double, double>> range_of_zoom;
   std::size_t outside_sphere = 0, seen_when_culled = 0, far_points = 0, far_points_beyond_zoom_1 = 0;
-  std::size_t folded = 0, folded_further = 0, triangles = 0, wrong_edges = 0, other_range = 0, not_covered = 0, no_normals = 0;
+  std::size_t folded = 0, folded_further = 0, triangles = 0, wrong_edges = 0, other_range = 0, not_covered = 0;
+  std::size_t no_normals = 0;
   for (std::size_t i = 0; i < decoded.size(); ++i) {
     const json& tile = decoded[i];
     INFO(tile.value("file", std::string()));

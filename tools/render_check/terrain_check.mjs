@@ -88,8 +88,14 @@ try {
         },
       });
       const start = window.terratiles.frame;
-      for (let i = 0; i < 600 && window.terratiles.frame < start + 30; i++) await new Promise((f) => setTimeout(f, 100));
-      return { frames: window.terratiles.frame - start, show: entity.isShowing, groundPrimitives: viewer.scene.groundPrimitives.length };
+      for (let i = 0; i < 600 && window.terratiles.frame < start + 30; i++) {
+        await new Promise((f) => setTimeout(f, 100));
+      }
+      return {
+        frames: window.terratiles.frame - start,
+        show: entity.isShowing,
+        groundPrimitives: viewer.scene.groundPrimitives.length,
+      };
     });
     if (opts.screenshot) await page.screenshot({ path: opts.screenshot });
   }
