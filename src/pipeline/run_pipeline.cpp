@@ -99,6 +99,10 @@ void validateOptions(const BuildOptions& options) {
                                                     : "--scheme " + std::string(tileSchemeName(options.scheme))) +
                     "; leave it out");
   }
+  if (!options.fill_dem.empty() && options.format != OutputFormat::QuantizedMesh) {
+    throw Error(ErrorCode::Usage, "--fill " + options.fill_dem +
+                                      " fills a terrain layer outside the data; add --format quantized-mesh");
+  }
   if (options.implicit_tiling && (options.lod != LodMethod::Clusters || options.scheme != TileSchemeKind::Geographic)) {
     throw Error(ErrorCode::Usage, std::string("--implicit is for the geographic scheme; found --scheme ") +
                                       (options.lod == LodMethod::Grid ? std::string("local pixels (--lod grid)")
@@ -213,6 +217,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
 
   BuildSummary summary;
   summary.output_dir = options.output_dir;
+  // A terrain layer's fill, read (and refused) before the long work.
+  const FillHeight terrain_fill =
+      terrain ? terrainFill(geoid ? &*geoid : nullptr, options.fill_dem, summary.terrain_fill, progress) : FillHeight();
   // Everything written: into place, and the summary's time.
   const auto finish = [&] {
     progress.throwIfCancelled();
@@ -285,7 +292,7 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     }
     returnFreedMemory();  // what building the levels freed
     if (terrain) {
-      writeQuantizedMeshLayer(levels, plan.max_zoom, globe, geoid ? &*geoid : nullptr, output, summary, progress);
+      writeQuantizedMeshLayer(levels, plan.max_zoom, globe, terrain_fill, output, summary, progress);
       summary.entry_file = "layer.json";
       progress.note("report: not written for --format quantized-mesh (the check reads tilesets)");
       return finish();

@@ -38,6 +38,9 @@ struct BuildOptions {
   std::string output_dir;
   bool force = false;
   OutputFormat format = OutputFormat::Tileset;
+  // --format quantized-mesh: outside the data, the terrain of this raster (WGS84 longitude
+  // and latitude, heights as --heights says, for example ETOPO5) instead of the geoid surface.
+  std::string fill_dem;
   LodMethod lod = LodMethod::Clusters;
   TileSchemeKind scheme = TileSchemeKind::WebMercator;  // clusters only
   Assignment assignment = Assignment::Merge;            // clusters only
@@ -120,6 +123,7 @@ struct BuildSummary {
   std::string generator;    // "terratiles <version>"
   std::string report_path;  // OUTDIR/report.html, or empty
   std::string entry_file = "tileset.json";  // what a client opens: tileset.json or layer.json
+  std::string terrain_fill;  // a terrain layer: what covers the globe outside the data
   bool check_ran = false;
   bool check_ok = false;
   std::string crs_name;

@@ -6,11 +6,15 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
+#include "formats/dem/read_dem.h"
 #include "formats/quantized_mesh/write_quantized_mesh.h"
+#include "src/base/error.h"
+#include "src/geo/crs_transform.h"
 #include "src/base/version.h"
 #include "src/pipeline/tile_output.h"
 #include "src/tiling/clip_to_tile.h"
@@ -67,12 +71,47 @@ std::array<float, 2> zoomHeightRange(const std::vector<TerrainTileMesh>& tiles) 
 
 }  // namespace
 
-void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
-                             const GeoidGrid* geoid, OutputDirectory& output, BuildSummary& summary,
-                             Progress& progress) {
-  const auto fill_height = [geoid](double lon, double lat) {
+FillHeight terrainFill(const GeoidGrid* geoid, const std::string& fill_dem, std::string& description,
+                       Progress& progress) {
+  const auto undulation = [geoid](double lon, double lat) {
     return geoid ? geoid->undulationAt(lon, lat).value_or(0.0) : 0.0;
   };
+  if (fill_dem.empty()) {
+    description = geoid ? "the geoid surface (" + geoid->name + ", height 0)" : std::string("the ellipsoid");
+    return undulation;
+  }
+  auto dem = std::make_shared<DemGrid>(readDem({fill_dem}, "reading the fill DEM", progress));
+  if (!CrsToWgs84(dem->crs_wkt).isWgs84LonLat() || dem->col_offset != 0 || dem->row_offset != 0) {
+    throw Error(ErrorCode::Input, fill_dem + ": the fill DEM is in " + dem->crs_name +
+                                      "; expected WGS84 longitude and latitude (EPSG:4326, for example ETOPO5); "
+                                      "gdalwarp -t_srs EPSG:4326 makes one");
+  }
+  description = fill_dem + " (" + std::to_string(dem->width) + " x " + std::to_string(dem->height) +
+                " px), the geoid surface where it has no data";
+  return [dem, undulation](double lon, double lat) {
+    // Bilinear between the four pixel centres around the point (clamped at the raster's
+    // edges), over the valid ones.
+    const double x = (lon - dem->origin_x) / dem->pixel_size_x - 0.5, y = (dem->origin_y - lat) / dem->pixel_size_y - 0.5;
+    const double fx = std::floor(x), fy = std::floor(y);
+    double sum = 0, weight = 0;
+    for (int dy = 0; dy <= 1; ++dy) {
+      for (int dx = 0; dx <= 1; ++dx) {
+        const auto col = static_cast<std::int32_t>(std::clamp(fx + dx, 0.0, dem->width - 1.0));
+        const auto row = static_cast<std::int32_t>(std::clamp(fy + dy, 0.0, dem->height - 1.0));
+        const double w = (dx ? x - fx : 1 - (x - fx)) * (dy ? y - fy : 1 - (y - fy));
+        if (w > 0 && dem->isValid(col, row)) {
+          sum += w * dem->heightAt(col, row);
+          weight += w;
+        }
+      }
+    }
+    return (weight > 0 ? sum / weight : 0.0) + undulation(lon, lat);
+  };
+}
+
+void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
+                             const FillHeight& fill_height, OutputDirectory& output, BuildSummary& summary,
+                             Progress& progress) {
   progress.beginStage("writing terrain tiles", static_cast<std::size_t>(max_zoom) + 1);
   nlohmann::json available = nlohmann::json::array();
   std::vector<ZoomSummary> zoom_summaries;

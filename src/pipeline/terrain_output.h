@@ -15,11 +15,13 @@
 // normals from the whole level (shading continuous across tiles), then every tile the level
 // meets is cut from it (clipToTile: neighbours share their sides' vertices bit for bit) and
 // covered whole (fillTile: where the data is not, the geoid surface, height 0 above it, or
-// the ellipsoid without a geoid). Both zoom-0 tiles exist, so a client has terrain
+// the ellipsoid without a geoid; or a coarser DEM, `--fill`). Both zoom-0 tiles exist, so a client has terrain
 // everywhere; deeper, the tiles the data meets (and so their parents). Tiles in parallel,
 // written in a fixed order: the layer does not depend on the thread count.
 
 #include <cstdint>
+#include <functional>
+#include <string>
 #include <vector>
 
 #include "formats/output_directory.h"
@@ -35,10 +37,20 @@ namespace terratiles {
 // (180 degrees a side) follow the ellipsoid to within about 8 km, a zoom-5 tile's to 8 m.
 inline constexpr std::int32_t kFillGridCells = 16;
 
+// The fill's ellipsoidal height at (longitude, latitude) in degrees.
+using FillHeight = std::function<double(double lon_deg, double lat_deg)>;
+
+// The geoid surface (height 0 above `geoid`; the ellipsoid without one), or with `fill_dem`
+// (a raster in WGS84 longitude and latitude, heights above `geoid` when given) its heights,
+// bilinear between pixel centres and the geoid surface where it has no data. `description`
+// says which, for the summary. Throws Error(Input) for a fill raster in another CRS.
+FillHeight terrainFill(const GeoidGrid* geoid, const std::string& fill_dem, std::string& description,
+                       Progress& progress);
+
 // levels[0] is the finest; zoom max_zoom shows it. Adds to summary (zooms, tiles, triangles,
 // bytes) and writes through `output`.
 void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
-                             const GeoidGrid* geoid, OutputDirectory& output, BuildSummary& summary,
+                             const FillHeight& fill_height, OutputDirectory& output, BuildSummary& summary,
                              Progress& progress);
 
 }  // namespace terratiles

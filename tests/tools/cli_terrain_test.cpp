@@ -293,3 +293,63 @@ TEST_CASE("CesiumJS takes the quantized-mesh layers of SRTM N57E011 and Interlak
   checkInCesium(test::sharedData("ch_dhm25_interlaken_25m_2056.tif"), {"--tin-max-error", "1", "--geoid", chgeo},
                 chgeo, 1.05, "interlaken_terrain");
 }
+
+TEST_CASE("build --format quantized-mesh --fill ETOPO5: outside the data, ETOPO5's heights above EGM96") {
+  test::TempDir dir;
+  const std::string etopo5 = test::sharedData("etopo5_global_4326.tif");
+  const std::string out = dir / "terrain";
+  const auto built = runTerratiles({"build", test::sharedData("srtm3_N57E011_4326.tif"), "-o", out, "--format",
+                                    "quantized-mesh", "--tin-max-error", "2", "--fill", etopo5, "-q"});
+  REQUIRE_MESSAGE(built.exit_code == 0, built.err);
+  // Zoom 0's eastern tile, far from the data: its fill grid point at 90 E 22.5 N (Bangladesh's
+  // coast) against the four ETOPO5 pixels around it plus EGM96 there.
+  const json tile = test::decodeQuantizedMeshFiles({out + "/0/1/0.terrain"}).front();
+  const json& header = tile["header"];
+  const TileBounds bounds = terrainTileBounds({0, 1, 0});
+  std::size_t nearest = 0;
+  double nearest_distance = 1e9;
+  for (std::size_t k = 0; k < tile["u"].size(); ++k) {
+    const GeodeticPoint p = decodedPosition(bounds, header["minHeight"], header["maxHeight"],
+                                            {tile["u"][k].get<std::uint16_t>(), tile["v"][k].get<std::uint16_t>(),
+                                             tile["height"][k].get<std::uint16_t>()});
+    const double distance = std::hypot(p.lon_deg - 90, p.lat_deg - 22.5);
+    if (distance < nearest_distance) {
+      nearest_distance = distance;
+      nearest = k;
+    }
+  }
+  REQUIRE(nearest_distance < 0.01);
+  const GeodeticPoint got = decodedPosition(bounds, header["minHeight"], header["maxHeight"],
+                                            {tile["u"][nearest].get<std::uint16_t>(),
+                                             tile["v"][nearest].get<std::uint16_t>(),
+                                             tile["height"][nearest].get<std::uint16_t>()});
+  const DemGrid dem = readDem({etopo5});
+  const double x = (90 - dem.origin_x) / dem.pixel_size_x - 0.5, y = (dem.origin_y - 22.5) / dem.pixel_size_y - 0.5;
+  double low = 1e9, high = -1e9;
+  for (const int c : {static_cast<int>(std::floor(x)), static_cast<int>(std::floor(x)) + 1}) {
+    for (const int r : {static_cast<int>(std::floor(y)), static_cast<int>(std::floor(y)) + 1}) {
+      low = std::min(low, static_cast<double>(dem.heightAt(c, r)));
+      high = std::max(high, static_cast<double>(dem.heightAt(c, r)));
+    }
+  }
+  const double undulation = readGeoidGrid("/usr/share/proj/egm96_15.gtx").undulationAt(90, 22.5).value();
+  const double step = (header["maxHeight"].get<double>() - header["minHeight"].get<double>()) / 32767;
+  CHECK(got.height_m >= low + undulation - step);
+  CHECK(got.height_m <= high + undulation + step);
+  // The fill reaches the Himalaya: the zoom's heights span far more than the geoid's.
+  CHECK(header["maxHeight"].get<double>() > 4000);
+
+  // Refused: a fill without a terrain layer (exit 2), a fill raster not in longitude and
+  // latitude (exit 3), before anything is written.
+  const auto tileset = runTerratiles({"build", test::sharedData("srtm3_N57E011_4326.tif"), "-o", dir / "a", "--fill",
+                                      etopo5});
+  CHECK(tileset.exit_code == 2);
+  CHECK(tileset.err.find("add --format quantized-mesh") != std::string::npos);
+  const auto projected = runTerratiles({"build", test::sharedData("srtm3_N57E011_4326.tif"), "-o", dir / "b",
+                                        "--format", "quantized-mesh", "--fill",
+                                        test::sharedData("ch_dhm25_interlaken_25m_2056.tif")});
+  CHECK(projected.exit_code == 3);
+  CHECK(projected.err.find("the fill DEM is in EPSG:2056; expected WGS84 longitude and latitude") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "a"));
+  CHECK_FALSE(fs::exists(dir / "b"));
+}

@@ -129,6 +129,7 @@ void printJsonSummary(const BuildSummary& s, std::ostream& err) {
   const bool terrain = s.entry_file == "layer.json";
   // A terrain layer's tiles are not measured yet: no figure rather than a zero.
   j["worst_error_m"] = terrain ? nlohmann::json() : nlohmann::json(s.worst_error_m);
+  if (terrain) j["fill"] = s.terrain_fill;
   j["seconds"] = s.seconds;
   if (!s.blocks.empty()) j["blocks"] = s.blocks;
   j["check"] = s.check_ran ? (s.check_ok ? "ok" : "failed") : "not run";
@@ -154,8 +155,9 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
            << z.tile_triangles << std::setw(13) << z.bytes << std::setprecision(2) << std::setw(7)
            << (z.tile_triangles ? static_cast<double>(z.bytes) / static_cast<double>(z.tile_triangles) : 0.0) << "\n";
     }
-    text << "  total " << s.tiles << " tiles (gzip'd quantized-mesh, the whole globe at zoom 0, the fill the geoid "
-         << "surface), " << humanBytes(s.tile_bytes) << ", " << std::setprecision(2) << s.seconds << " s\n";
+    text << "  total " << s.tiles << " tiles (gzip'd quantized-mesh, the whole globe at zoom 0), "
+         << humanBytes(s.tile_bytes) << ", " << std::setprecision(2) << s.seconds << " s\n";
+    text << "  fill     " << s.terrain_fill << "\n";
     text << "  errors   not measured yet for --format quantized-mesh; no report\n";
     err << text.str() << std::flush;
     return;
@@ -809,6 +811,9 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
                    "CesiumJS's CesiumTerrainProvider takes as the globe's terrain; the geographic scheme)")
       ->check(CLI::IsMember({"tileset", "quantized-mesh"}))
       ->capture_default_str();
+  build_command->add_option("--fill", build.fill_dem,
+                            "--format quantized-mesh: outside the data, the terrain of this raster (WGS84 longitude "
+                            "and latitude, heights as --heights says, e.g. ETOPO5) instead of the geoid surface");
   build_command
       ->add_option("--lod", lod_choice,
                    "Levels of detail: clusters (greedy TIN, cluster levels, clusters assigned to web tiles: the "
