@@ -222,7 +222,7 @@
         updateLegend(true);
       });
       viewer.terrainProvider = terrainProvider;
-      scene.globe.enableLighting = false;
+      scene.globe.enableLighting = true;  // the tiles' normals, lit by the fixed sun
       window.terratilesApi.terrainProvider = terrainProvider;
       const zoom = layer.available.length - 1;
       const size = 180 / 2 ** zoom;
@@ -235,7 +235,13 @@
       }
       status.region = { west: w, south: s, east: e, north: n };
       status.center = { lon: (w + e) / 2, lat: (s + n) / 2, height: 0 };
-      viewer.camera.setView({ destination: Cesium.Rectangle.fromDegrees(w, s, e, n) });
+      // Tilted over the middle (at the terrain's height there), from about the rectangle's
+      // diagonal, so the relief shows.
+      const middle = Cesium.Cartographic.fromDegrees((w + e) / 2, (s + n) / 2);
+      const [ground] = await Cesium.sampleTerrainMostDetailed(terrainProvider, [middle]);
+      const diagonal = Cesium.Cartesian3.distance(Cesium.Cartesian3.fromDegrees(w, s), Cesium.Cartesian3.fromDegrees(e, n));
+      window.terratilesApi.lookAt((w + e) / 2, (s + n) / 2, Number.isFinite(ground.height) ? ground.height : 0,
+        0.8 * diagonal, -35);
       zoomDone = true;
     } catch (e) {
       status.error = (e && e.message) || String(e);
