@@ -272,7 +272,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     level_options.level_ratio = options.level_ratio;
     level_options.simplifier = options.simplifier;
     level_options.tail_stop = options.tail_stop;
-    level_options.measure = false;  // the tiles are measured as drawn
+    // A tileset's tiles are measured as drawn; a terrain layer's tiles show the levels
+    // themselves (cut and filled), so the levels are measured.
+    level_options.measure = terrain;
     if (options.level_error_growth > 0) {
       level_options.level_error_growth = options.level_error_growth;
       level_options.first_budget_m = options.tin_max_error_m * options.level_error_growth;
@@ -289,6 +291,11 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     } else {
       levels.emplace_back();
       levels[0].mesh = std::move(finest.mesh);
+      if (terrain) {  // measured as buildLevels measures a level
+        std::vector<EcefPoint> ecef(levels[0].mesh.vertices.size());
+        globe.place(levels[0].mesh.vertices, {}, ecef);
+        levels[0].error = measureTin(globe, levels[0].mesh, ecef);
+      }
     }
     returnFreedMemory();  // what building the levels freed
     if (terrain) {

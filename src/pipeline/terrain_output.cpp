@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <numbers>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -71,6 +72,10 @@ std::array<float, 2> zoomHeightRange(const std::vector<TerrainTileMesh>& tiles) 
 
 }  // namespace
 
+double clientLevelError(std::int32_t zoom) {
+  return 6378137.0 * 2 * std::numbers::pi * 0.25 / (65.0 * 2) / std::ldexp(1.0, zoom);
+}
+
 FillHeight terrainFill(const GeoidGrid* geoid, const std::string& fill_dem, std::string& description,
                        Progress& progress) {
   const auto undulation = [geoid](double lon, double lat) {
@@ -114,6 +119,7 @@ void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_
                              Progress& progress) {
   progress.beginStage("writing terrain tiles", static_cast<std::size_t>(max_zoom) + 1);
   nlohmann::json available = nlohmann::json::array();
+  nlohmann::json zoom_errors = nlohmann::json::array();
   std::vector<ZoomSummary> zoom_summaries;
   std::size_t shown_level = levels.size();
   GeodeticMesh mesh;
@@ -152,6 +158,21 @@ void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_
     });
     ZoomSummary zoom_summary;
     zoom_summary.zoom = zoom;
+    zoom_summary.max_error_m = levels[l].error.max_error_m;
+    zoom_summary.rms_error_m = levels[l].error.rms_error_m;
+    zoom_summary.geometric_error_m = clientLevelError(zoom);
+    const TinErrorStatistics& error = levels[l].error;
+    zoom_errors.insert(zoom_errors.begin(), nlohmann::json::object({{"zoom", zoom},
+                                                                    {"level", l},
+                                                                    {"max_error_m", error.max_error_m},
+                                                                    {"rms_error_m", error.rms_error_m},
+                                                                    {"measured_pixels", error.measured_pixels},
+                                                                    {"client_geometric_error_m", clientLevelError(zoom)}}));
+    if (levels[l].error.max_error_m > clientLevelError(zoom)) {
+      progress.note("warning: zoom " + std::to_string(zoom) + " is " + std::to_string(levels[l].error.max_error_m) +
+                    " m off the DEM, more than the " + std::to_string(clientLevelError(zoom)) +
+                    " m CesiumTerrainProvider assumes for it");
+    }
     zoom_summary.tiles = keys.size();
     zoom_summary.vertices = levels[l].mesh.vertices.size();
     zoom_summary.triangles = levels[l].mesh.triangleCount();
@@ -183,8 +204,12 @@ void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_
   layer["maxzoom"] = max_zoom;
   layer["extensions"] = {"octvertexnormals"};
   layer["available"] = std::move(available);
+  // terratiles' own figures (clients ignore them): per zoom, its level's error against the DEM
+  // (measured on the triangles as drawn, at every valid pixel) and the error CesiumJS assumes.
+  layer["terratiles"] = {{"generator", std::string("terratiles ") + kVersion}, {"zooms", std::move(zoom_errors)}};
   summary.bytes += output.writeFile("layer.json", layer.dump(1) + "\n");
   for (auto z = zoom_summaries.rbegin(); z != zoom_summaries.rend(); ++z) {
+    if (z->zoom < max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, z->max_error_m);
     summary.tiles += z->tiles;
     summary.triangles += z->triangles;
     summary.bytes += z->bytes;

@@ -6,7 +6,9 @@
 // Layout (the TMS geographic quadtree, EPSG:4326, as Cesium World Terrain's):
 //   layer.json          tilejson 2.1.0, format quantized-mesh-1.0, scheme tms, the tile URL
 //                       template, extensions ["octvertexnormals"] and `available`: per zoom,
-//                       the rectangles of tiles that exist
+//                       the rectangles of tiles that exist; and `terratiles.zooms`: per zoom,
+//                       its level's measured error against the DEM and the error a client
+//                       assumes for it (clientLevelError)
 //   {z}/{x}/{y}.terrain one gzip'd quantized-mesh tile (formats/quantized_mesh)
 //
 // Zoom z shows level max_zoom - z (level 0, the finest TIN, at max_zoom); the zooms coarser
@@ -36,6 +38,11 @@ namespace terratiles {
 // Fill grid: cells along each side of a tile, so that the straight triangles of a zoom-0 tile
 // (180 degrees a side) follow the ellipsoid to within about 8 km, a zoom-5 tile's to 8 m.
 inline constexpr std::int32_t kFillGridCells = 16;
+
+// The geometric error CesiumTerrainProvider assumes for a zoom of a quantized-mesh layer
+// (TerrainProvider.getEstimatedLevelZeroGeometricErrorForAHeightmap: the equatorial
+// circumference x 0.25 / (65 x 2) at zoom 0, halved per zoom): about 77 km at zoom 0.
+double clientLevelError(std::int32_t zoom);
 
 // The fill's ellipsoidal height at (longitude, latitude) in degrees.
 using FillHeight = std::function<double(double lon_deg, double lat_deg)>;

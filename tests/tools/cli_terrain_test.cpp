@@ -59,15 +59,20 @@ std::string buildLayer(const test::TempDir& dir) {
 // tools/render_check/terrain_check.mjs, NaturalEarthII draped) takes the layer built from
 // `raster` with `build_args` as its terrain: no tile fails, a clampToGround polyline renders,
 // and sampleTerrainMostDetailed at 200 random valid pixels gives the DEM height plus the
-// geoid within `bound_m`. A screenshot goes to test-artifacts/`name`.png.
+// geoid within the finest zoom's measured error (layer.json) plus 5 cm: the quantisation of
+// heights (range / 32767: under 1 cm on N57E011, 5 cm at Interlaken's zoom 12) and
+// positions, and the straight triangles' sag, which a client's interpolation in longitude and
+// latitude does not follow. A screenshot goes to test-artifacts/`name`.png.
 void checkInCesium(const std::string& raster, const std::vector<std::string>& build_args, const std::string& geoid_path,
-                   double bound_m, const std::string& name) {
+                   const std::string& name) {
   test::TempDir dir;
   const std::string out = dir / "terrain";
   std::vector<std::string> args{"build", raster, "-o", out, "--format", "quantized-mesh", "-q"};
   args.insert(args.end(), build_args.begin(), build_args.end());
   const auto built = runTerratiles(args);
   REQUIRE_MESSAGE(built.exit_code == 0, built.err);
+  std::ifstream layer_file(out + "/layer.json");
+  const double bound_m = json::parse(layer_file)["terratiles"]["zooms"].back()["max_error_m"].get<double>() + 0.05;
   const DemGrid dem = readDem({raster});
   const GeoidGrid geoid = readGeoidGrid(geoid_path);
   const CrsToWgs84 to_wgs84(dem.crs_wkt);
@@ -117,7 +122,7 @@ void checkInCesium(const std::string& raster, const std::vector<std::string>& bu
     worst = std::max(worst, std::fabs(result["heights"][i].get<double>() - expected[i]));
   }
   CHECK(missing == 0);
-  MESSAGE(name << ": largest difference to DEM + geoid at 200 pixels: " << worst << " m");
+  MESSAGE(name << ": largest difference to DEM + geoid at 200 pixels: " << worst << " m (bound " << bound_m << " m)");
   CHECK(worst <= bound_m);
 }
 
@@ -135,6 +140,19 @@ TEST_CASE("build --format quantized-mesh: a whole-globe layer whose tiles decode
   const int max_zoom = layer["maxzoom"];
   REQUIRE(layer["available"].size() == static_cast<std::size_t>(max_zoom) + 1);
   CHECK(max_zoom >= 8);
+  // Every zoom's level measured against the DEM: the finest within the TIN's bound, every one
+  // within the error CesiumJS assumes for its zoom.
+  const json& zooms = layer["terratiles"]["zooms"];
+  REQUIRE(zooms.size() == static_cast<std::size_t>(max_zoom) + 1);
+  for (int z = 0; z <= max_zoom; ++z) {
+    const json& zoom = zooms[static_cast<std::size_t>(z)];
+    CHECK(zoom["zoom"] == z);
+    CHECK(zoom["measured_pixels"].get<std::size_t>() == 1201u * 1201u);
+    CHECK(zoom["max_error_m"].get<double>() > 0);
+    CHECK(zoom["max_error_m"].get<double>() <= zoom["client_geometric_error_m"].get<double>());
+  }
+  CHECK(zooms.back()["max_error_m"].get<double>() <= 2.0);
+  CHECK(zooms.front()["max_error_m"].get<double>() > zooms.back()["max_error_m"].get<double>());
 
   // The tiles written are exactly those `available` lists; zoom 0 has both; every other tile's
   // parent is there.
@@ -283,15 +301,11 @@ TEST_CASE("build --format quantized-mesh refuses what it cannot write, with exit
 }
 
 TEST_CASE("CesiumJS takes the quantized-mesh layers of SRTM N57E011 and Interlaken as its terrain") {
-  // The bound: the finest TIN's (measured on the triangles as drawn) plus 5 cm for the
-  // quantisation of heights (range / 32767: under 1 cm on N57E011, 5 cm at Interlaken's zoom
-  // 12) and positions, and the straight triangles' sag, which a client's interpolation in
-  // longitude and latitude does not follow.
   checkInCesium(test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"}, "/usr/share/proj/egm96_15.gtx",
-                2.05, "srtm_terrain");
+                "srtm_terrain");
   const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
   checkInCesium(test::sharedData("ch_dhm25_interlaken_25m_2056.tif"), {"--tin-max-error", "1", "--geoid", chgeo},
-                chgeo, 1.05, "interlaken_terrain");
+                chgeo, "interlaken_terrain");
 }
 
 TEST_CASE("build --format quantized-mesh --fill ETOPO5: outside the data, ETOPO5's heights above EGM96") {
