@@ -210,6 +210,16 @@ bool visibleFrom(const EcefPoint& camera, const EcefPoint& point) {
 }
 }  // namespace
 
+std::set<std::array<double, 3>> verticesOnSide(const TerrainTileMesh& tile, bool meridian, bool low_side) {
+  const TileBounds& r = tile.rectangle;
+  const double line = meridian ? (low_side ? r.west : r.east) : (low_side ? r.south : r.north);
+  std::set<std::array<double, 3>> found;
+  for (const GeodeticPoint& p : tile.vertices) {
+    if ((meridian ? p.lon_deg : p.lat_deg) == line) found.insert({p.lon_deg, p.lat_deg, p.height_m});
+  }
+  return found;
+}
+
 HorizonCulling cullByHorizonPoint(const EcefPoint& occlusion, const std::vector<EcefPoint>& vertices) {
   std::vector<EcefPoint> scaled;
   for (const EcefPoint& p : vertices) scaled.push_back({p.x / 6378137.0, p.y / 6378137.0, p.z / 6356752.3142451793});

@@ -14,6 +14,7 @@
 #include "src/dem/dem_grid.h"
 #include "src/geo/crs_transform.h"
 #include "src/pipeline/check_output.h"
+#include "src/tiling/clip_to_tile.h"
 #include "src/tin/measure_tin.h"
 
 namespace terratiles::test {
@@ -106,6 +107,11 @@ std::vector<nlohmann::json> decodeQuantizedMeshFiles(const std::vector<std::stri
 // point, all round it), how many see the point, how many cannot (CesiumJS's
 // EllipsoidalOccluder.isScaledSpacePointVisible), and how many vertices the latter see anyway
 // (0 for a sound point).
+// A terrain tile's vertices on one side of its rectangle, as (lon, lat, height): its west
+// (meridian, low side), east, south or north side. Two tiles that share a side must hold the
+// same set there, bit for bit.
+std::set<std::array<double, 3>> verticesOnSide(const TerrainTileMesh& tile, bool meridian, bool low_side);
+
 struct HorizonCulling {
   std::size_t cameras_seeing = 0;
   std::size_t cameras_culling = 0;

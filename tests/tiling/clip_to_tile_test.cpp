@@ -137,16 +137,8 @@ TEST_CASE("clipToTile: a real TIN cut into terrain tiles keeps its surface and m
         const TerrainTileKey other_key{zoom, key.x + (east ? 1 : 0), key.y + (east ? 0 : 1)};
         const auto other = tiles.find(other_key);
         if (other == tiles.end()) continue;
-        const auto onSide = [&](const TerrainTileMesh& t, bool take_low_side) {
-          std::set<std::array<double, 3>> found;
-          for (const GeodeticPoint& p : t.vertices) {
-            const double line = east ? (take_low_side ? t.rectangle.west : t.rectangle.east)
-                                     : (take_low_side ? t.rectangle.south : t.rectangle.north);
-            if ((east ? p.lon_deg : p.lat_deg) == line) found.insert({p.lon_deg, p.lat_deg, p.height_m});
-          }
-          return found;
-        };
-        const auto mine = onSide(tile, false), theirs = onSide(other->second, true);
+        const auto mine = test::verticesOnSide(tile, east, false);
+        const auto theirs = test::verticesOnSide(other->second, east, true);
         CHECK(mine == theirs);
         const auto describe = [](const TerrainTileKey& k, const std::array<double, 3>& m) {
           std::ostringstream text;

@@ -114,16 +114,7 @@ TEST_CASE("fillTile: tiles around real data cover their rectangles, the data unt
       for (const bool east : {true, false}) {
         const auto other = tiles.find({zoom, key.x + (east ? 1 : 0), key.y + (east ? 0 : 1)});
         if (other == tiles.end()) continue;
-        const auto onSide = [&](const TerrainTileMesh& t, bool low_side) {
-          std::set<std::array<double, 3>> found;
-          for (const GeodeticPoint& p : t.vertices) {
-            const double line = east ? (low_side ? t.rectangle.west : t.rectangle.east)
-                                     : (low_side ? t.rectangle.south : t.rectangle.north);
-            if ((east ? p.lon_deg : p.lat_deg) == line) found.insert({p.lon_deg, p.lat_deg, p.height_m});
-          }
-          return found;
-        };
-        CHECK(onSide(tile, false) == onSide(other->second, true));
+        CHECK(test::verticesOnSide(tile, east, false) == test::verticesOnSide(other->second, east, true));
         ++sides;
       }
     }
