@@ -15,9 +15,13 @@
 #include <fstream>
 #include <sstream>
 
+#include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
 #include "formats/tin/tin_file.h"
+#include "src/base/progress.h"
 #include "src/geo/dem_on_globe.h"
+#include "src/tin/build_tin.h"
+#include "src/tin/grid_tin.h"
 #include "tools/terratiles/run_cli.h"
 
 namespace terratiles::test {
@@ -341,6 +345,41 @@ void checkSameReport(const CheckReport& a, const CheckReport& b) {
   CHECK(a.region_violations == b.region_violations);
   CHECK(a.content_region_violations == b.content_region_violations);
   CHECK(a.problems == b.problems);
+}
+
+SrtmTerrainTile srtmTerrainTile(double max_error_m, std::int32_t grid_step) {
+  const DemGrid dem = readDem({sharedData("srtm3_N57E011_4326.tif")});
+  TinMesh tin;
+  if (grid_step > 0) {
+    tin = triangulateGrid(dem, grid_step);
+  } else {
+    Progress progress;
+    TinOptions options;
+    options.max_error_m = max_error_m;
+    tin = buildTin(dem, options, progress);
+  }
+  SrtmTerrainTile tile;
+  double last_col = 0, last_row = 0;
+  for (const GridPoint& p : tin.vertices) {
+    last_col = std::max(last_col, p.col);
+    last_row = std::max(last_row, p.row);
+  }
+  for (std::uint32_t i = 0; i < tin.vertices.size(); ++i) {
+    const GridPoint& p = tin.vertices[i];
+    const CrsPoint at = dem.pixelCentre(p.col, p.row);
+    tile.mesh.vertices.push_back({at.x, at.y, p.height_m});
+    const double lon = at.x * std::numbers::pi / 180, lat = at.y * std::numbers::pi / 180;
+    tile.mesh.normals.push_back({static_cast<float>(std::cos(lat) * std::cos(lon)),
+                                 static_cast<float>(std::cos(lat) * std::sin(lon)), static_cast<float>(std::sin(lat))});
+    if (p.col == 0) tile.on_side[0].insert(i);
+    if (p.row == last_row) tile.on_side[1].insert(i);
+    if (p.col == last_col) tile.on_side[2].insert(i);
+    if (p.row == 0) tile.on_side[3].insert(i);
+  }
+  const CrsPoint north_west = dem.pixelCentre(0, 0), south_east = dem.pixelCentre(last_col, last_row);
+  tile.mesh.rectangle = {north_west.x, south_east.y, south_east.x, north_west.y};
+  tile.mesh.triangles = tin.triangle_indices;
+  return tile;
 }
 
 }  // namespace terratiles::test

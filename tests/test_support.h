@@ -112,6 +112,16 @@ std::vector<nlohmann::json> decodeQuantizedMeshFiles(const std::vector<std::stri
 // same set there, bit for bit.
 std::set<std::array<double, 3>> verticesOnSide(const TerrainTileMesh& tile, bool meridian, bool low_side);
 
+// A real terrain tile: SRTM N57E011's TIN to `max_error_m` (or its grid every `grid_step`
+// pixels when grid_step > 0) in longitude, latitude and the DEM's heights, with the
+// ellipsoid's normals, in the rectangle of its outermost pixel centres (so the raster's
+// border vertices lie on the tile's sides).
+struct SrtmTerrainTile {
+  TerrainTileMesh mesh;
+  std::array<std::set<std::uint32_t>, 4> on_side;  // mesh vertices on the west, south, east, north side
+};
+SrtmTerrainTile srtmTerrainTile(double max_error_m, std::int32_t grid_step);
+
 struct HorizonCulling {
   std::size_t cameras_seeing = 0;
   std::size_t cameras_culling = 0;

@@ -5,6 +5,7 @@
 #include <bit>
 #include <map>
 #include <numbers>
+#include <span>
 #include <tuple>
 #include <utility>
 
@@ -38,17 +39,15 @@ std::string gridText(std::int32_t zoom) {
          std::to_string(rows) + " tiles";
 }
 
-std::string templatePath(const char* folder, std::int32_t hemisphere, const char* extension) {
-  return std::string(folder) + "/" + kHemisphereNames[hemisphere] + "/{level}/{x}/{y}." +
-         extension;
-}
+}  // namespace
 
-std::string filledPath(const char* folder, const ImplicitTileCoordinates& c,
-                       const char* extension) {
+std::string implicitFilePath(const char* folder, const ImplicitTileCoordinates& c, const char* extension) {
   return std::string(folder) + "/" + kHemisphereNames[c.hemisphere] + "/" +
          std::to_string(c.level) + "/" + std::to_string(c.x) + "/" + std::to_string(c.y) + "." +
          extension;
 }
+
+namespace {
 
 // One available tile of an implicit tree, with the values its tile metadata carries.
 struct ImplicitTile {
@@ -258,12 +257,13 @@ nlohmann::json availabilityJson(std::uint64_t length_bits,
 }
 
 struct SubtreeTiles {
-  std::vector<std::pair<std::uint64_t, const ImplicitTile*>> tiles;  // (availability bit, tile)
+  std::vector<std::pair<std::uint64_t, const ImplicitTileRecord*>> tiles;  // (availability bit, tile)
   std::vector<std::uint64_t> child_subtree_bits;
 };
 
 ImplicitFile subtreeFile(const ImplicitTileCoordinates& root, SubtreeTiles& subtree,
-                         std::int32_t subtree_levels, bool has_content) {
+                         std::span<const ImplicitTileProperty> properties, std::int32_t subtree_levels,
+                         bool has_content) {
   std::sort(subtree.tiles.begin(), subtree.tiles.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
   std::sort(subtree.child_subtree_bits.begin(), subtree.child_subtree_bits.end());
@@ -272,18 +272,17 @@ ImplicitFile subtreeFile(const ImplicitTileCoordinates& root, SubtreeTiles& subt
 
   std::vector<std::uint64_t> available;
   std::vector<std::uint64_t> with_content;
-  // Tile metadata is packed by increasing availability index (spec "Tile Metadata").
-  std::vector<std::uint8_t> errors;
-  std::vector<std::uint8_t> regions;
+  // Tile metadata is packed by increasing availability index (spec "Tile Metadata"), one
+  // buffer view per property.
+  std::vector<std::vector<std::uint8_t>> columns(properties.size());
   for (const auto& [bit, tile] : subtree.tiles) {
     available.push_back(bit);
     if (tile->has_content) with_content.push_back(bit);
-    appendFloat64(errors, tile->geometric_error_m);
-    for (const double value : {tile->region.west_rad, tile->region.south_rad,
-                               tile->region.east_rad, tile->region.north_rad,
-                               tile->region.min_height_m, tile->region.max_height_m}) {
-      appendFloat64(regions, value);
+    std::size_t value = 0;
+    for (std::size_t p = 0; p < properties.size(); ++p) {
+      for (std::size_t i = 0; i < properties[p].valuesPerTile(); ++i) appendFloat64(columns[p], tile->metadata.at(value++));
     }
+    TERRATILES_ASSERT(value == tile->metadata.size());
   }
 
   BinaryChunk chunk;
@@ -298,8 +297,9 @@ ImplicitFile subtreeFile(const ImplicitTileCoordinates& root, SubtreeTiles& subt
   nlohmann::json table;
   table["class"] = kTileClass;
   table["count"] = subtree.tiles.size();
-  table["properties"][kErrorProperty]["values"] = chunk.addView(errors);
-  table["properties"][kRegionProperty]["values"] = chunk.addView(regions);
+  for (std::size_t p = 0; p < properties.size(); ++p) {
+    table["properties"][properties[p].name]["values"] = chunk.addView(columns[p]);
+  }
   json["propertyTables"] = nlohmann::json::array({table});
   json["tileMetadata"] = 0;
   json["bufferViews"] = chunk.views();
@@ -313,7 +313,7 @@ ImplicitFile subtreeFile(const ImplicitTileCoordinates& root, SubtreeTiles& subt
   std::string text = json.dump();
   text.resize(roundUpTo8(text.size()), ' ');
   ImplicitFile file;
-  file.path = filledPath("subtrees", root, "subtree");
+  file.path = implicitFilePath("subtrees", root, "subtree");
   file.bytes.reserve(24 + text.size() + binary.size());
   appendUint32(file.bytes, 0x74627573u);
   appendUint32(file.bytes, 1);
@@ -324,65 +324,19 @@ ImplicitFile subtreeFile(const ImplicitTileCoordinates& root, SubtreeTiles& subt
   return file;
 }
 
-// The subtree files of one tree, ordered by subtree root (level, y, x). A subtree exists
-// where its root tile is available: availability is closed under parents, so exactly the
-// subtrees holding available tiles.
-std::vector<ImplicitFile> subtreeFiles(const ImplicitTree& tree, std::int32_t subtree_levels) {
-  std::map<std::tuple<std::int32_t, std::int64_t, std::int64_t>, SubtreeTiles> subtrees;
-  const std::int64_t child_mask = (std::int64_t{1} << subtree_levels) - 1;
-  for (const ImplicitTile& tile : tree.tiles) {
-    const ImplicitTileCoordinates& c = tile.coordinates;
-    const std::int32_t depth = c.level % subtree_levels;
-    const std::int64_t root_x = c.x >> depth;
-    const std::int64_t root_y = c.y >> depth;
-    const std::uint64_t bit =
-        levelOffset(depth) + mortonIndex(c.x - (root_x << depth), c.y - (root_y << depth));
-    subtrees[{c.level - depth, root_y, root_x}].tiles.emplace_back(bit, &tile);
-    if (depth == 0 && c.level > 0) {
-      // The root of a child subtree: one bit in its parent subtree, indexed by the Morton
-      // index one level below that subtree's deepest level.
-      subtrees[{c.level - subtree_levels, c.y >> subtree_levels, c.x >> subtree_levels}]
-          .child_subtree_bits.push_back(mortonIndex(c.x & child_mask, c.y & child_mask));
-    }
-  }
-  std::vector<ImplicitFile> files;
-  for (auto& [key, subtree] : subtrees) {
-    TERRATILES_ASSERT(!subtree.tiles.empty());
-    const ImplicitTileCoordinates root{tree.hemisphere, std::get<0>(key), std::get<2>(key),
-                                       std::get<1>(key)};
-    files.push_back(subtreeFile(root, subtree, subtree_levels, tree.has_content));
-  }
-  return files;
+// The tile properties of a tileset's implicit tiles: its measured error and region.
+const std::vector<ImplicitTileProperty>& tilesetProperties() {
+  static const std::vector<ImplicitTileProperty> properties = {
+      {kErrorProperty, "TILE_GEOMETRIC_ERROR",
+       "geometricError of the tile in metres, as measured (it does not halve per level)", "SCALAR", 0},
+      {kRegionProperty, "TILE_BOUNDING_REGION",
+       "bounding region of the tile and its descendants' content: west, south, east, north "
+       "in radians, minimum and maximum height in metres above the WGS84 ellipsoid",
+       "SCALAR", 6}};
+  return properties;
 }
 
 // ---- tileset.json ------------------------------------------------------------------------
-
-nlohmann::json schemaJson() {
-  nlohmann::json error;
-  error["description"] =
-      "geometricError of the tile in metres, as measured (it does not halve per level)";
-  error["type"] = "SCALAR";
-  error["componentType"] = "FLOAT64";
-  error["semantic"] = "TILE_GEOMETRIC_ERROR";
-  error["required"] = true;
-  nlohmann::json region;
-  region["description"] =
-      "bounding region of the tile and its descendants' content: west, south, east, north "
-      "in radians, minimum and maximum height in metres above the WGS84 ellipsoid";
-  region["type"] = "SCALAR";
-  region["componentType"] = "FLOAT64";
-  region["array"] = true;
-  region["count"] = 6;
-  region["semantic"] = "TILE_BOUNDING_REGION";
-  region["required"] = true;
-  nlohmann::json schema;
-  schema["id"] = "terratiles";
-  nlohmann::json& tile = schema["classes"][kTileClass];
-  tile["description"] = "Per-tile values of the implicit tiles, overriding the subdivision";
-  tile["properties"][kErrorProperty] = std::move(error);
-  tile["properties"][kRegionProperty] = std::move(region);
-  return schema;
-}
 
 nlohmann::json regionJson(double west_rad, double south_rad, double east_rad, double north_rad,
                           double min_height_m, double max_height_m) {
@@ -403,13 +357,13 @@ nlohmann::json implicitRootJson(const ImplicitTree& tree, std::int32_t subtree_l
   tile["geometricError"] = root.geometric_error_m;
   if (is_tileset_root) tile["refine"] = "REPLACE";
   if (tree.has_content) {
-    tile["content"]["uri"] = templatePath("tiles", tree.hemisphere, "glb");
+    tile["content"]["uri"] = implicitTemplatePath("tiles", tree.hemisphere, "glb");
   }
   nlohmann::json& implicit = tile["implicitTiling"];
   implicit["subdivisionScheme"] = "QUADTREE";
   implicit["subtreeLevels"] = subtree_levels;
   implicit["availableLevels"] = tree.deepest_level + 1;
-  implicit["subtrees"]["uri"] = templatePath("subtrees", tree.hemisphere, "subtree");
+  implicit["subtrees"]["uri"] = implicitTemplatePath("subtrees", tree.hemisphere, "subtree");
   return tile;
 }
 
@@ -431,7 +385,7 @@ ImplicitTileCoordinates implicitTileCoordinates(const TileKey& key) {
 }
 
 std::string implicitContentUri(const TileKey& key) {
-  return filledPath("tiles", implicitTileCoordinates(key), "glb");
+  return implicitFilePath("tiles", implicitTileCoordinates(key), "glb");
 }
 
 bool tileKeyFromImplicitUri(const std::string& uri, TileKey& key) {
@@ -460,6 +414,69 @@ bool tileKeyFromContentUri(const std::string& uri, TileKey& key) {
   return true;
 }
 
+std::string implicitTemplatePath(const char* folder, std::int32_t hemisphere, const char* extension) {
+  return std::string(folder) + "/" + kHemisphereNames[hemisphere] + "/{level}/{x}/{y}." + extension;
+}
+
+std::size_t ImplicitTileProperty::valuesPerTile() const {
+  return static_cast<std::size_t>(type == "VEC3" ? 3 : 1) * static_cast<std::size_t>(std::max(array_count, 1));
+}
+
+nlohmann::json implicitTileSchema(std::span<const ImplicitTileProperty> properties, const std::string& class_description) {
+  nlohmann::json schema;
+  schema["id"] = "terratiles";
+  nlohmann::json& tile = schema["classes"][kTileClass];
+  tile["description"] = class_description;
+  for (const ImplicitTileProperty& property : properties) {
+    nlohmann::json json;
+    json["description"] = property.description;
+    json["type"] = property.type;
+    json["componentType"] = "FLOAT64";
+    if (property.array_count > 0) {
+      json["array"] = true;
+      json["count"] = property.array_count;
+    }
+    json["semantic"] = property.semantic;
+    json["required"] = true;
+    tile["properties"][property.name] = std::move(json);
+  }
+  return schema;
+}
+
+std::vector<ImplicitFile> implicitSubtreeFiles(std::int32_t hemisphere, const std::vector<ImplicitTileRecord>& tiles,
+                                               std::span<const ImplicitTileProperty> properties,
+                                               std::int32_t subtree_levels) {
+  std::map<std::tuple<std::int32_t, std::int64_t, std::int64_t>, SubtreeTiles> subtrees;
+  const std::int64_t child_mask = (std::int64_t{1} << subtree_levels) - 1;
+  bool has_content = false;
+  for (const ImplicitTileRecord& tile : tiles) {
+    has_content = has_content || tile.has_content;
+    const ImplicitTileCoordinates& c = tile.coordinates;
+    const std::int32_t depth = c.level % subtree_levels;
+    const std::int64_t root_x = c.x >> depth;
+    const std::int64_t root_y = c.y >> depth;
+    const std::uint64_t bit =
+        levelOffset(depth) + mortonIndex(c.x - (root_x << depth), c.y - (root_y << depth));
+    subtrees[{c.level - depth, root_y, root_x}].tiles.emplace_back(bit, &tile);
+    if (depth == 0 && c.level > 0) {
+      // The root of a child subtree: one bit in its parent subtree, indexed by the Morton
+      // index one level below that subtree's deepest level.
+      subtrees[{c.level - subtree_levels, c.y >> subtree_levels, c.x >> subtree_levels}]
+          .child_subtree_bits.push_back(mortonIndex(c.x & child_mask, c.y & child_mask));
+    }
+  }
+  std::vector<ImplicitFile> files;
+  for (auto& [key, subtree] : subtrees) {
+    if (subtree.tiles.empty()) {
+      throw Error(ErrorCode::Internal, "implicit tiling: a subtree at level " + std::to_string(std::get<0>(key)) +
+                                           " has child subtrees but no root tile; every tile's parent must be available");
+    }
+    const ImplicitTileCoordinates root{hemisphere, std::get<0>(key), std::get<2>(key), std::get<1>(key)};
+    files.push_back(subtreeFile(root, subtree, properties, subtree_levels, has_content));
+  }
+  return files;
+}
+
 std::vector<ImplicitFile> writeImplicitTileset(const Tileset& tileset,
                                                std::int32_t subtree_levels) {
   if (subtree_levels < 1 || subtree_levels > kMaxSubtreeLevels) {
@@ -472,7 +489,7 @@ std::vector<ImplicitFile> writeImplicitTileset(const Tileset& tileset,
   nlohmann::json json;
   json["asset"] = {{"version", "1.1"}, {"generator", tileset.generator}};
   json["geometricError"] = tileset.geometric_error_m;
-  json["schema"] = schemaJson();
+  json["schema"] = implicitTileSchema(tilesetProperties(), "Per-tile values of the implicit tiles, overriding the subdivision");
   // An explicit content-less root with the data's region above the implicit root(s) (one
   // per hemisphere with data): the implicit roots' volumes must be the zoom-0 squares for
   // the subdivision, but a viewer frames the tileset by its root, which must be the data.
@@ -489,7 +506,17 @@ std::vector<ImplicitFile> writeImplicitTileset(const Tileset& tileset,
   const std::string text = json.dump(1, '\t') + "\n";
   files.push_back({"tileset.json", std::vector<std::uint8_t>(text.begin(), text.end())});
   for (const ImplicitTree& tree : trees) {
-    for (ImplicitFile& file : subtreeFiles(tree, subtree_levels)) files.push_back(std::move(file));
+    std::vector<ImplicitTileRecord> records;
+    records.reserve(tree.tiles.size());
+    for (const ImplicitTile& tile : tree.tiles) {
+      const Region& r = tile.region;
+      records.push_back({tile.coordinates, tile.has_content,
+                         {tile.geometric_error_m, r.west_rad, r.south_rad, r.east_rad, r.north_rad, r.min_height_m,
+                          r.max_height_m}});
+    }
+    for (ImplicitFile& file : implicitSubtreeFiles(tree.hemisphere, records, tilesetProperties(), subtree_levels)) {
+      files.push_back(std::move(file));
+    }
   }
   return files;
 }

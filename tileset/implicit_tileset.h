@@ -19,8 +19,11 @@
 // SOUTH (2^zoom - 1 - TileKey.y; TileKey counts rows from the north).
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "src/tiling/tile_key.h"
 #include "tileset/tileset.h"
@@ -67,6 +70,43 @@ struct ImplicitFile {
   std::string path;  // relative to the output directory, '/'-separated
   std::vector<std::uint8_t> bytes;
 };
+
+// "folder/H/{level}/{x}/{y}.extension": the URI template of an implicit root's content
+// ("tiles", "glb") or subtrees ("subtrees", "subtree"), H its hemisphere's name.
+std::string implicitTemplatePath(const char* folder, std::int32_t hemisphere, const char* extension);
+// The same filled in for one tile.
+std::string implicitFilePath(const char* folder, const ImplicitTileCoordinates& c, const char* extension);
+
+// One property of the tile metadata class ("tile"): FLOAT64 components, a SCALAR or VEC3,
+// or a fixed-length array of them (array_count > 0), carrying a semantic of the 3D Metadata
+// Semantic Reference.
+struct ImplicitTileProperty {
+  std::string name;
+  std::string semantic;
+  std::string description;
+  std::string type = "SCALAR";  // "SCALAR" or "VEC3"
+  std::int32_t array_count = 0;
+  std::size_t valuesPerTile() const;
+};
+
+// An available tile and its metadata: the properties' values one after the other.
+struct ImplicitTileRecord {
+  ImplicitTileCoordinates coordinates;
+  bool has_content = false;
+  std::vector<double> metadata;
+};
+
+// tileset.json's "schema": the class "tile" with `properties`.
+nlohmann::json implicitTileSchema(std::span<const ImplicitTileProperty> properties,
+                                  const std::string& class_description);
+
+// The binary subtree files (subtrees/H/{level}/{x}/{y}.subtree) of one hemisphere's available
+// tiles, `subtree_levels` levels each, with the tiles' metadata as the subtrees' property
+// table: tile, content and child-subtree availability. `tiles` must be closed under parents
+// (every available tile's parent is available); any order. Throws Error(Internal) otherwise.
+std::vector<ImplicitFile> implicitSubtreeFiles(std::int32_t hemisphere, const std::vector<ImplicitTileRecord>& tiles,
+                                               std::span<const ImplicitTileProperty> properties,
+                                               std::int32_t subtree_levels);
 
 // tileset.json (first) and every subtree file of `tileset` as implicit tiling; the caller
 // writes them, and each content at implicitContentUri(key).

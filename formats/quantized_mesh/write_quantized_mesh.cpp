@@ -154,6 +154,37 @@ bool horizonOcclusionPoint(const EcefPoint& direction, std::span<const EcefPoint
   return true;
 }
 
+TerrainTileCulling terrainTileCulling(std::span<const EcefPoint> ecef) {
+  TerrainTileCulling culling;
+  // The bounding sphere: the centre of the points' box, the farthest point's distance.
+  if (!ecef.empty()) {
+    EcefPoint lo = ecef[0], hi = ecef[0];
+    for (const EcefPoint& p : ecef) {
+      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    culling.sphere_center = {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
+    double radius_squared = 0;
+    for (const EcefPoint& p : ecef) {
+      const EcefPoint d{p.x - culling.sphere_center.x, p.y - culling.sphere_center.y, p.z - culling.sphere_center.z};
+      radius_squared = std::max(radius_squared, dot(d, d));
+    }
+    // A millimetre more than the farthest vertex: a client's float arithmetic stays inside.
+    culling.sphere_radius_m = std::sqrt(radius_squared) + 1e-3;
+  }
+  if (!horizonOcclusionPoint(culling.sphere_center, ecef, culling.horizon_occlusion_point)) {
+    // The tile spans too much of the globe for a point every vertex is in front of (a quarter
+    // of it and more): a point far out over its centre, which only a view from the far side
+    // of the Earth puts behind the horizon.
+    EcefPoint toward = scaled(culling.sphere_center);
+    const double length = std::sqrt(dot(toward, toward));
+    culling.horizon_occlusion_point =
+        length > 0 ? EcefPoint{toward.x / length * 1e3, toward.y / length * 1e3, toward.z / length * 1e3}
+                   : EcefPoint{0, 0, 1e3};
+  }
+  return culling;
+}
+
 std::array<float, 2> floatRangeAround(double low, double high) {
   float low_f = static_cast<float>(low), high_f = static_cast<float>(high);
   if (low_f > low) low_f = std::nextafter(low_f, -std::numeric_limits<float>::infinity());
@@ -228,36 +259,15 @@ std::vector<std::uint8_t> encodeQuantizedMesh(const TerrainTileMesh& mesh, const
     tile.positions[i] = decodedPosition(r, low_f, high_f, tile.quantized[i]);
   }
 
-  // The bounding sphere of the decoded positions (the centre of their box) and the horizon
-  // occlusion point seen from its centre; the tile's centre is the sphere's.
+  // The bounding sphere of the decoded positions and the horizon occlusion point seen from
+  // its centre; the tile's centre is the sphere's.
   std::vector<EcefPoint> ecef(count);
   geodeticToEcef(tile.positions, ecef);
-  if (count > 0) {
-    EcefPoint lo = ecef[0], hi = ecef[0];
-    for (const EcefPoint& p : ecef) {
-      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-    }
-    tile.sphere_center = {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
-    double radius_squared = 0;
-    for (const EcefPoint& p : ecef) {
-      const EcefPoint d{p.x - tile.sphere_center.x, p.y - tile.sphere_center.y, p.z - tile.sphere_center.z};
-      radius_squared = std::max(radius_squared, dot(d, d));
-    }
-    // A millimetre more than the farthest vertex: a client's float arithmetic stays inside.
-    tile.sphere_radius_m = std::sqrt(radius_squared) + 1e-3;
-  }
+  const TerrainTileCulling culling = terrainTileCulling(ecef);
+  tile.sphere_center = culling.sphere_center;
+  tile.sphere_radius_m = culling.sphere_radius_m;
+  tile.horizon_occlusion_point = culling.horizon_occlusion_point;
   tile.center = tile.sphere_center;
-  if (!horizonOcclusionPoint(tile.sphere_center, ecef, tile.horizon_occlusion_point)) {
-    // The tile spans too much of the globe for a point every vertex is in front of (a quarter
-    // of it and more): a point far out over its centre, which only a view from the far side
-    // of the Earth puts behind the horizon.
-    EcefPoint toward = scaled(tile.sphere_center);
-    const double length = std::sqrt(dot(toward, toward));
-    tile.horizon_occlusion_point =
-        length > 0 ? EcefPoint{toward.x / length * 1e3, toward.y / length * 1e3, toward.z / length * 1e3}
-                   : EcefPoint{0, 0, 1e3};
-  }
 
   // The vertices on each side, in order along it.
   for (std::uint32_t i = 0; i < count; ++i) {

@@ -83,6 +83,18 @@ GeodeticPoint decodedPosition(const TileBounds& rectangle, float minimum_height_
 // none (the points span too much of the globe, or `direction` is the origin).
 bool horizonOcclusionPoint(const EcefPoint& direction, std::span<const EcefPoint> points, EcefPoint& result);
 
+// What a client culls a terrain tile with, from the positions it decodes (ECEF): their
+// bounding sphere (the centre of their box, a millimetre beyond the farthest) and the horizon
+// occlusion point seen from its centre (ellipsoid-scaled; for a tile spanning a quarter of
+// the globe or more, which has none, a point far out over the centre). Both terrain formats
+// carry these (quantized-mesh in its header, 3D Tiles terrain as tile metadata).
+struct TerrainTileCulling {
+  EcefPoint sphere_center;
+  double sphere_radius_m = 0;
+  EcefPoint horizon_occlusion_point;
+};
+TerrainTileCulling terrainTileCulling(std::span<const EcefPoint> ecef);
+
 // [low, high] rounded outwards to floats, as a header holds a height range.
 std::array<float, 2> floatRangeAround(double low, double high);
 

@@ -5,8 +5,9 @@
 //
 // URL parameters:
 //   tileset=URL    tileset.json to load (default /data/tileset.json)
-//   terrain=URL    instead: a quantized-mesh layer.json, shown as the globe's terrain
-//                  (CesiumTerrainProvider) with the imagery draped on it
+//   terrain=URL    instead: a terrain layer shown as the globe's terrain with the imagery
+//                  draped on it: a quantized-mesh layer.json (CesiumTerrainProvider) or the
+//                  tileset.json of 3D Tiles terrain (Cesium3DTilesTerrainProvider)
 //   sse=N          maximumScreenSpaceError (default 16)
 //   bv=1           show tile bounding volumes
 //   colorize=1     colour tiles randomly (debugColorizeTiles)
@@ -205,16 +206,22 @@
     return { lon: deg(lonC), lat: deg((s + n) / 2), height: (minH + maxH) / 2 };
   }
 
-  // A quantized-mesh layer as the globe's terrain: tile failures counted, the view on the
-  // finest zoom's tiles (layer.json's last `available` ranges).
+  // A terrain layer as the globe's terrain: tile failures counted, the view on the finest
+  // zoom's tiles (layer.json's last `available` ranges, or the same in a 3D Tiles terrain
+  // tileset's extras).
   async function loadTerrain() {
     try {
       const resp = await fetch(terrainUrl, { cache: 'no-store' });
       if (!resp.ok) throw new Error(`HTTP ${resp.status} for ${terrainUrl}`);
-      const layer = await resp.json();
-      terrainProvider = await Cesium.CesiumTerrainProvider.fromUrl(terrainUrl.replace(/layer\.json$/, ''), {
-        requestVertexNormals: true,
-      });
+      const json = await resp.json();
+      const tiles3d = /tileset\.json$/.test(terrainUrl);
+      const layer = tiles3d ? json.extras.terratiles : json;
+      status.terrainFormat = tiles3d ? '3d-tiles-terrain' : 'quantized-mesh';
+      terrainProvider = tiles3d
+        ? await Cesium.Cesium3DTilesTerrainProvider.fromUrl(terrainUrl, { requestVertexNormals: true })
+        : await Cesium.CesiumTerrainProvider.fromUrl(terrainUrl.replace(/layer\.json$/, ''), {
+          requestVertexNormals: true,
+        });
       terrainProvider.errorEvent.addEventListener((err) => {
         const where = err && err.level !== undefined ? `${err.level}/${err.x}/${err.y}` : terrainUrl;
         status.failedTiles.push({ url: where, message: String((err && err.message) || err) });

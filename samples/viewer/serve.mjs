@@ -167,6 +167,15 @@ export function checkCesiumInstalled() {
   }
 }
 
+// Whether tileset.json is 3D Tiles terrain (terratiles build --format terrain).
+function isTerrainTileset(file) {
+  try {
+    return JSON.parse(fs.readFileSync(file, 'utf8')).extras?.terratiles?.format === '3d-tiles-terrain';
+  } catch {
+    return false;
+  }
+}
+
 export function startServer({ outDir, port = DEFAULT_PORT, log = false }) {
   checkCesiumInstalled();
   const root = path.resolve(outDir);
@@ -187,7 +196,9 @@ export function startServer({ outDir, port = DEFAULT_PORT, log = false }) {
         // A terrain layer (layer.json) is shown as the globe's terrain, a tileset on it.
         viewerUrl: fs.existsSync(path.join(root, 'layer.json'))
           ? `${url}?terrain=/data/layer.json`
-          : `${url}?tileset=/data/tileset.json`,
+          : isTerrainTileset(path.join(root, 'tileset.json'))
+            ? `${url}?terrain=/data/tileset.json`
+            : `${url}?tileset=/data/tileset.json`,
         close: () =>
           new Promise((r) => {
             server.closeAllConnections?.();

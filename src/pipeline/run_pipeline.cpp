@@ -89,19 +89,19 @@ void validateOptions(const BuildOptions& options) {
     throw Error(ErrorCode::Usage, "--draco-speed is " + std::to_string(options.draco_speed) +
                                       "; expected 0 (smallest) to 10 (fastest)");
   }
-  if (options.format == OutputFormat::QuantizedMesh &&
+  if (isTerrainLayer(options.format) &&
       (options.lod != LodMethod::Clusters || options.scheme != TileSchemeKind::Geographic || options.implicit_tiling)) {
     throw Error(ErrorCode::Usage,
-                std::string("--format quantized-mesh takes the clusters' levels on the geographic scheme (its TMS "
-                            "quadtree); found ") +
+                std::string("--format ") + outputFormatName(options.format) +
+                    " takes the clusters' levels on the geographic scheme (its quadtree); found " +
                     (options.lod == LodMethod::Grid ? std::string("--lod grid")
                      : options.implicit_tiling      ? std::string("--implicit")
                                                     : "--scheme " + std::string(tileSchemeName(options.scheme))) +
                     "; leave it out");
   }
-  if (!options.fill_dem.empty() && options.format != OutputFormat::QuantizedMesh) {
+  if (!options.fill_dem.empty() && !isTerrainLayer(options.format)) {
     throw Error(ErrorCode::Usage, "--fill " + options.fill_dem +
-                                      " fills a terrain layer outside the data; add --format quantized-mesh");
+                                      " fills a terrain layer outside the data; add --format quantized-mesh or terrain");
   }
   if (options.implicit_tiling && (options.lod != LodMethod::Clusters || options.scheme != TileSchemeKind::Geographic)) {
     throw Error(ErrorCode::Usage, std::string("--implicit is for the geographic scheme; found --scheme ") +
@@ -177,13 +177,23 @@ ConstrainedTin buildFinestTin(const DemGrid& dem, const DemOnGlobe* globe, doubl
   return tin;
 }
 
+const char* outputFormatName(OutputFormat format) {
+  switch (format) {
+    case OutputFormat::Tileset: return "tileset";
+    case OutputFormat::QuantizedMesh: return "quantized-mesh";
+    case OutputFormat::TerrainTiles3d: return "terrain";
+  }
+  return "tileset";
+}
+
 BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
   const auto start = std::chrono::steady_clock::now();
   validateOptions(options);
   const DemMosaic mosaic = scanDemMosaic(options.inputs, &progress);
   if (const std::int32_t block_pixels = buildBlockPixels(options, mosaic); block_pixels > 0) {
-    if (options.format == OutputFormat::QuantizedMesh) {
-      throw Error(ErrorCode::Usage, "--format quantized-mesh builds the mosaic in one piece, and this one (" +
+    if (isTerrainLayer(options.format)) {
+      throw Error(ErrorCode::Usage, std::string("--format ") + outputFormatName(options.format) +
+                                        " builds the mosaic in one piece, and this one (" +
                                         std::to_string(mosaic.width) + " x " + std::to_string(mosaic.height) +
                                         " pixels) would be built in blocks; build a smaller area, or a tileset");
     }
@@ -195,8 +205,9 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
                                       " pixels; pass --block-pixels N to build in blocks)");
   }
   if (Ranks::rank() != 0) return {};  // under mpirun, a whole build is rank 0's alone
-  const bool terrain = options.format == OutputFormat::QuantizedMesh;
-  OutputDirectory output(options.output_dir, options.force, terrain ? "layer.json" : "tileset.json");
+  const bool terrain = isTerrainLayer(options.format);
+  OutputDirectory output(options.output_dir, options.force,
+                         options.format == OutputFormat::QuantizedMesh ? "layer.json" : "tileset.json");
 
   DemGrid dem = readDem(mosaic, "reading DEM", progress);  // its pixels let go before the report's check
   const DemStatistics stats = computeStatistics(dem);
@@ -299,9 +310,11 @@ BuildSummary runPipeline(const BuildOptions& options, Progress& progress) {
     }
     returnFreedMemory();  // what building the levels freed
     if (terrain) {
-      writeQuantizedMeshLayer(levels, plan.max_zoom, globe, terrain_fill, output, summary, progress);
-      summary.entry_file = "layer.json";
-      progress.note("report: not written for --format quantized-mesh (the check reads tilesets)");
+      writeTerrainLayer(levels, plan.max_zoom, globe, terrain_fill, options.format, output, summary, progress);
+      summary.format = options.format;
+      summary.entry_file = options.format == OutputFormat::QuantizedMesh ? "layer.json" : "tileset.json";
+      progress.note(std::string("report: not written for --format ") + outputFormatName(options.format) +
+                    " (the check reads tilesets of Draco GLBs)");
       return finish();
     }
     progress.beginStage("assigning clusters to tiles", levels.size());

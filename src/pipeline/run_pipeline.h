@@ -21,12 +21,17 @@ enum class HeightReference {
   Ellipsoidal,  // heights already above the WGS84 ellipsoid: use as they are
 };
 
-// What a build writes: a 3D Tiles tileset of Draco GLBs, or a quantized-mesh-1.0 terrain layer
-// (src/pipeline/terrain_output.h) that CesiumJS takes as the globe's terrain.
+// What a build writes: a 3D Tiles tileset of Draco GLBs, or a terrain layer that CesiumJS
+// takes as the globe's terrain (src/pipeline/terrain_output.h): quantized-mesh-1.0 or 3D Tiles
+// terrain.
 enum class OutputFormat {
-  Tileset,        // tileset.json and GLB tiles (the default)
-  QuantizedMesh,  // layer.json and {z}/{x}/{y}.terrain (the geographic scheme, clusters only)
+  Tileset,         // tileset.json and GLB tiles (the default)
+  QuantizedMesh,   // layer.json and {z}/{x}/{y}.terrain (the geographic scheme, clusters only)
+  TerrainTiles3d,  // 3D Tiles terrain: tileset.json, implicit quadtrees, meshopt GLB (likewise)
 };
+inline bool isTerrainLayer(OutputFormat format) { return format != OutputFormat::Tileset; }
+// "tileset", "quantized-mesh", "terrain": the --format names.
+const char* outputFormatName(OutputFormat format);
 
 enum class LodMethod {
   Clusters,  // the paper's method: greedy TIN, cluster levels, clusters assigned to web tiles
@@ -38,7 +43,7 @@ struct BuildOptions {
   std::string output_dir;
   bool force = false;
   OutputFormat format = OutputFormat::Tileset;
-  // --format quantized-mesh: outside the data, the terrain of this raster (WGS84 longitude
+  // A terrain layer (--format quantized-mesh or terrain): outside the data, the terrain of this raster (WGS84 longitude
   // and latitude, heights as --heights says, for example ETOPO5) instead of the geoid surface.
   std::string fill_dem;
   LodMethod lod = LodMethod::Clusters;
@@ -123,6 +128,7 @@ struct BuildSummary {
   std::string generator;    // "terratiles <version>"
   std::string report_path;  // OUTDIR/report.html, or empty
   std::string entry_file = "tileset.json";  // what a client opens: tileset.json or layer.json
+  OutputFormat format = OutputFormat::Tileset;
   std::string terrain_fill;  // a terrain layer: what covers the globe outside the data
   bool check_ran = false;
   bool check_ok = false;

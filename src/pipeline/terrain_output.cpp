@@ -8,18 +8,21 @@
 #include <map>
 #include <memory>
 #include <numbers>
+#include <span>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
 #include "formats/dem/read_dem.h"
 #include "formats/quantized_mesh/write_quantized_mesh.h"
+#include "formats/terrain_glb/write_terrain_glb.h"
 #include "src/base/error.h"
 #include "src/geo/crs_transform.h"
 #include "src/base/version.h"
 #include "src/pipeline/tile_output.h"
 #include "src/tiling/clip_to_tile.h"
 #include "src/tiling/fill_tile.h"
+#include "tileset/implicit_tileset.h"
 
 namespace terratiles {
 namespace {
@@ -70,6 +73,76 @@ std::array<float, 2> zoomHeightRange(const std::vector<TerrainTileMesh>& tiles) 
   return floatRangeAround(low, high);
 }
 
+// The tile metadata of 3D Tiles terrain (3D Metadata Semantic Reference), what
+// Cesium3DTilesTerrainProvider reads per tile, and the tile's measured error.
+const std::vector<ImplicitTileProperty>& terrainTileProperties() {
+  static const std::vector<ImplicitTileProperty> properties = {
+      {"minimumHeight", "TILE_MINIMUM_HEIGHT", "least ellipsoidal height of the tile's decoded vertices, metres"},
+      {"maximumHeight", "TILE_MAXIMUM_HEIGHT", "greatest ellipsoidal height of the tile's decoded vertices, metres"},
+      {"boundingSphere", "TILE_BOUNDING_SPHERE",
+       "sphere holding the tile's decoded vertices: centre (ECEF) and radius, metres", "SCALAR", 4},
+      {"horizonOcclusionPoint", "TILE_HORIZON_OCCLUSION_POINT",
+       "horizon occlusion point of the tile's decoded vertices, ellipsoid-scaled ECEF", "VEC3", 0},
+      {"geometricError", "TILE_GEOMETRIC_ERROR",
+       "the largest distance, in metres, between the DEM and the level the tile's zoom shows, measured along "
+       "the vertical at every valid pixel (the fill outside the data is not measured)"}};
+  return properties;
+}
+
+// tileset.json and the subtrees of 3D Tiles terrain: a root over the globe whose two
+// children, the hemispheres, are the implicit quadtrees Cesium3DTilesTerrainProvider reads
+// (children[0] west, children[1] east). Returns the bytes written.
+std::size_t writeTerrainTileset(const std::array<std::vector<ImplicitTileRecord>, 2>& hemisphere_tiles,
+                                std::int32_t max_zoom, const std::string& generator, nlohmann::json zoom_errors,
+                                nlohmann::json available, OutputDirectory& output) {
+  constexpr double kPi = std::numbers::pi;
+  const std::span<const ImplicitTileProperty> properties = terrainTileProperties();
+  nlohmann::json json;
+  json["asset"] = {{"version", "1.1"}, {"generator", generator}};
+  // With nothing drawn, the error is the relief itself; what a client assumes at zoom 0 is larger.
+  json["geometricError"] = clientLevelError(0);
+  json["schema"] = implicitTileSchema(properties, "3D Tiles terrain: per-tile heights, culling volumes and error");
+  // terratiles' own figures (clients ignore them): per zoom its level's measured error, and
+  // the tiles per zoom as rectangles of TMS columns and rows (layer.json's `available`).
+  json["extras"]["terratiles"] = {{"format", "3d-tiles-terrain"},
+                                  {"zooms", std::move(zoom_errors)},
+                                  {"available", std::move(available)}};
+  nlohmann::json& root = json["root"];
+  root["geometricError"] = clientLevelError(0);
+  root["refine"] = "REPLACE";
+  root["children"] = nlohmann::json::array();
+  double globe_low = std::numeric_limits<double>::infinity(), globe_high = -globe_low;
+  std::size_t bytes = 0;
+  for (std::int32_t hemisphere = 0; hemisphere < 2; ++hemisphere) {
+    const std::vector<ImplicitTileRecord>& tiles = hemisphere_tiles[hemisphere];
+    double low = std::numeric_limits<double>::infinity(), high = -low, zoom0_error = 0;
+    for (const ImplicitTileRecord& tile : tiles) {
+      low = std::min(low, tile.metadata[0]);
+      high = std::max(high, tile.metadata[1]);
+      if (tile.coordinates.level == 0) zoom0_error = tile.metadata.back();
+    }
+    globe_low = std::min(globe_low, low);
+    globe_high = std::max(globe_high, high);
+    const double west = hemisphere == 0 ? -kPi : 0.0;
+    nlohmann::json child;
+    child["boundingVolume"]["region"] = {west, -kPi / 2, west + kPi, kPi / 2, low, high};
+    child["geometricError"] = zoom0_error;
+    child["content"]["uri"] = implicitTemplatePath("tiles", hemisphere, "glb");
+    nlohmann::json& implicit = child["implicitTiling"];
+    implicit["subdivisionScheme"] = "QUADTREE";
+    implicit["subtreeLevels"] = kDefaultSubtreeLevels;
+    implicit["availableLevels"] = max_zoom + 1;
+    implicit["subtrees"]["uri"] = implicitTemplatePath("subtrees", hemisphere, "subtree");
+    root["children"].push_back(std::move(child));
+    for (const ImplicitFile& file : implicitSubtreeFiles(hemisphere, tiles, properties, kDefaultSubtreeLevels)) {
+      bytes += output.writeFile(file.path, file.bytes);
+    }
+  }
+  root["boundingVolume"]["region"] = {-kPi, -kPi / 2, kPi, kPi / 2, globe_low, globe_high};
+  bytes += output.writeFile("tileset.json", json.dump(1, '\t') + "\n");
+  return bytes;
+}
+
 }  // namespace
 
 double clientLevelError(std::int32_t zoom) {
@@ -114,9 +187,12 @@ FillHeight terrainFill(const GeoidGrid* geoid, const std::string& fill_dem, std:
   };
 }
 
-void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
-                             const FillHeight& fill_height, OutputDirectory& output, BuildSummary& summary,
-                             Progress& progress) {
+void writeTerrainLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
+                       const FillHeight& fill_height, OutputFormat format, OutputDirectory& output,
+                       BuildSummary& summary, Progress& progress) {
+  const bool quantized_mesh = format == OutputFormat::QuantizedMesh;
+  const std::string generator = std::string("terratiles ") + kVersion;
+  std::array<std::vector<ImplicitTileRecord>, 2> hemisphere_tiles;  // 3D Tiles terrain
   progress.beginStage("writing terrain tiles", static_cast<std::size_t>(max_zoom) + 1);
   nlohmann::json available = nlohmann::json::array();
   nlohmann::json zoom_errors = nlohmann::json::array();
@@ -147,15 +223,44 @@ void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_
       tiles[i] = fillTile(clipToTile(snapped, candidates.at(keys[i]), terrainTileBounds(keys[i])), kFillGridCells,
                           fill_height);
     });
-    QuantizedMeshOptions encoding;
-    encoding.height_range = zoomHeightRange(tiles);
     std::vector<std::vector<std::uint8_t>> files(keys.size());
     std::vector<std::size_t> triangles(keys.size());
-    tbb::parallel_for(std::size_t{0}, keys.size(), [&](std::size_t i) {
-      triangles[i] = tiles[i].triangles.size() / 3;
-      files[i] = gzipBytes(encodeQuantizedMesh(tiles[i], encoding));
-      tiles[i] = TerrainTileMesh();
-    });
+    std::vector<std::string> paths(keys.size());
+    double position_step_m = 0;  // 3D Tiles terrain: the zoom's coarsest position quantisation
+    if (quantized_mesh) {
+      QuantizedMeshOptions encoding;
+      encoding.height_range = zoomHeightRange(tiles);
+      tbb::parallel_for(std::size_t{0}, keys.size(), [&](std::size_t i) {
+        triangles[i] = tiles[i].triangles.size() / 3;
+        files[i] = gzipBytes(encodeQuantizedMesh(tiles[i], encoding));
+        tiles[i] = TerrainTileMesh();
+      });
+      for (std::size_t i = 0; i < keys.size(); ++i) {
+        paths[i] = std::to_string(zoom) + "/" + std::to_string(keys[i].x) + "/" + std::to_string(keys[i].y) + ".terrain";
+      }
+    } else {
+      std::vector<TerrainGlb> glbs(keys.size());
+      tbb::parallel_for(std::size_t{0}, keys.size(), [&](std::size_t i) {
+        glbs[i] = encodeTerrainGlb(tiles[i], generator);
+        triangles[i] = tiles[i].triangles.size() / 3;
+        files[i] = std::move(glbs[i].bytes);
+        tiles[i] = TerrainTileMesh();
+      });
+      for (const TerrainGlb& glb : glbs) position_step_m = std::max(position_step_m, glb.position_step_m);
+      for (std::size_t i = 0; i < keys.size(); ++i) {
+        // Implicit coordinates: the hemisphere's column, the row from the south (as TMS).
+        const std::int64_t rows = std::int64_t{1} << zoom;
+        const ImplicitTileCoordinates c{static_cast<std::int32_t>(keys[i].x / rows), zoom, keys[i].x % rows, keys[i].y};
+        paths[i] = implicitFilePath("tiles", c, "glb");
+        const TerrainGlb& t = glbs[i];
+        const TerrainTileCulling& k = t.culling;
+        hemisphere_tiles[c.hemisphere].push_back(
+            {c, true,
+             {t.minimum_height_m, t.maximum_height_m, k.sphere_center.x, k.sphere_center.y, k.sphere_center.z,
+              k.sphere_radius_m, k.horizon_occlusion_point.x, k.horizon_occlusion_point.y, k.horizon_occlusion_point.z,
+              levels[l].error.max_error_m}});
+      }
+    }
     ZoomSummary zoom_summary;
     zoom_summary.zoom = zoom;
     zoom_summary.max_error_m = levels[l].error.max_error_m;
@@ -168,19 +273,18 @@ void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_
                                                                     {"rms_error_m", error.rms_error_m},
                                                                     {"measured_pixels", error.measured_pixels},
                                                                     {"client_geometric_error_m", clientLevelError(zoom)}}));
+    if (!quantized_mesh) zoom_errors.front()["position_step_m"] = position_step_m;
     if (levels[l].error.max_error_m > clientLevelError(zoom)) {
       progress.note("warning: zoom " + std::to_string(zoom) + " is " + std::to_string(levels[l].error.max_error_m) +
                     " m off the DEM, more than the " + std::to_string(clientLevelError(zoom)) +
-                    " m CesiumTerrainProvider assumes for it");
+                    " m CesiumJS assumes for it");
     }
     zoom_summary.tiles = keys.size();
     zoom_summary.vertices = levels[l].mesh.vertices.size();
     zoom_summary.triangles = levels[l].mesh.triangleCount();
     for (std::size_t i = 0; i < keys.size(); ++i) {
       zoom_summary.tile_triangles += triangles[i];
-      zoom_summary.bytes += output.writeFile(std::to_string(zoom) + "/" + std::to_string(keys[i].x) + "/" +
-                                                 std::to_string(keys[i].y) + ".terrain",
-                                             files[i]);
+      zoom_summary.bytes += output.writeFile(paths[i], files[i]);
     }
     zoom_summaries.push_back(zoom_summary);
     available.insert(available.begin(), availableRectangles(keys));
@@ -189,25 +293,30 @@ void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_
   }
   progress.endStage();
 
-  nlohmann::json layer;
-  layer["tilejson"] = "2.1.0";
-  layer["name"] = "terratiles";
-  layer["description"] = "terrain from " + summary.crs_name + " by " + std::string("terratiles ") + kVersion;
-  layer["version"] = "1.0.0";
-  layer["format"] = "quantized-mesh-1.0";
-  layer["attribution"] = "";
-  layer["scheme"] = "tms";
-  layer["tiles"] = {"{z}/{x}/{y}.terrain?v={version}"};
-  layer["projection"] = "EPSG:4326";
-  layer["bounds"] = {-180.0, -90.0, 180.0, 90.0};
-  layer["minzoom"] = 0;
-  layer["maxzoom"] = max_zoom;
-  layer["extensions"] = {"octvertexnormals"};
-  layer["available"] = std::move(available);
-  // terratiles' own figures (clients ignore them): per zoom, its level's error against the DEM
-  // (measured on the triangles as drawn, at every valid pixel) and the error CesiumJS assumes.
-  layer["terratiles"] = {{"generator", std::string("terratiles ") + kVersion}, {"zooms", std::move(zoom_errors)}};
-  summary.bytes += output.writeFile("layer.json", layer.dump(1) + "\n");
+  if (quantized_mesh) {
+    nlohmann::json layer;
+    layer["tilejson"] = "2.1.0";
+    layer["name"] = "terratiles";
+    layer["description"] = "terrain from " + summary.crs_name + " by " + generator;
+    layer["version"] = "1.0.0";
+    layer["format"] = "quantized-mesh-1.0";
+    layer["attribution"] = "";
+    layer["scheme"] = "tms";
+    layer["tiles"] = {"{z}/{x}/{y}.terrain?v={version}"};
+    layer["projection"] = "EPSG:4326";
+    layer["bounds"] = {-180.0, -90.0, 180.0, 90.0};
+    layer["minzoom"] = 0;
+    layer["maxzoom"] = max_zoom;
+    layer["extensions"] = {"octvertexnormals"};
+    layer["available"] = std::move(available);
+    // terratiles' own figures (clients ignore them): per zoom, its level's error against the DEM
+    // (measured on the triangles as drawn, at every valid pixel) and the error CesiumJS assumes.
+    layer["terratiles"] = {{"generator", generator}, {"zooms", std::move(zoom_errors)}};
+    summary.bytes += output.writeFile("layer.json", layer.dump(1) + "\n");
+  } else {
+    summary.bytes += writeTerrainTileset(hemisphere_tiles, max_zoom, generator, std::move(zoom_errors),
+                                         std::move(available), output);
+  }
   for (auto z = zoom_summaries.rbegin(); z != zoom_summaries.rend(); ++z) {
     if (z->zoom < max_zoom) summary.worst_error_m = std::max(summary.worst_error_m, z->max_error_m);
     summary.tiles += z->tiles;

@@ -1,15 +1,21 @@
 #pragma once
-// writeQuantizedMeshLayer: the cluster levels as a quantized-mesh-1.0 terrain layer that
-// CesiumJS's CesiumTerrainProvider takes as the globe's terrain (`terratiles build --format
-// quantized-mesh`; issue 17).
+// writeTerrainLayer: the cluster levels as a terrain layer that CesiumJS takes as the globe's
+// terrain (`terratiles build --format quantized-mesh` or `--format terrain`; issue 17).
 //
-// Layout (the TMS geographic quadtree, EPSG:4326, as Cesium World Terrain's):
+// quantized-mesh-1.0 (CesiumTerrainProvider; the TMS geographic quadtree, EPSG:4326, as
+// Cesium World Terrain's):
 //   layer.json          tilejson 2.1.0, format quantized-mesh-1.0, scheme tms, the tile URL
 //                       template, extensions ["octvertexnormals"] and `available`: per zoom,
 //                       the rectangles of tiles that exist; and `terratiles.zooms`: per zoom,
 //                       its level's measured error against the DEM and the error a client
 //                       assumes for it (clientLevelError)
 //   {z}/{x}/{y}.terrain one gzip'd quantized-mesh tile (formats/quantized_mesh)
+//
+// 3D Tiles terrain (Cesium3DTilesTerrainProvider): the same tiles as meshopt GLBs
+// (formats/terrain_glb) in two implicit quadtrees, one per hemisphere (tileset/
+// implicit_tileset's layout: tiles/H/{level}/{x}/{y}.glb, subtrees/H/...), each tile's
+// heights, culling volumes and its zoom's measured error as tile metadata; tileset.json's
+// extras.terratiles repeats layer.json's per-zoom figures and `available`.
 //
 // Zoom z shows level max_zoom - z (level 0, the finest TIN, at max_zoom); the zooms coarser
 // than the coarsest level show the coarsest level. Each level's vertices are placed on the
@@ -54,10 +60,10 @@ using FillHeight = std::function<double(double lon_deg, double lat_deg)>;
 FillHeight terrainFill(const GeoidGrid* geoid, const std::string& fill_dem, std::string& description,
                        Progress& progress);
 
-// levels[0] is the finest; zoom max_zoom shows it. Adds to summary (zooms, tiles, triangles,
-// bytes) and writes through `output`.
-void writeQuantizedMeshLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
-                             const FillHeight& fill_height, OutputDirectory& output, BuildSummary& summary,
-                             Progress& progress);
+// levels[0] is the finest; zoom max_zoom shows it. `format` is QuantizedMesh or
+// TerrainTiles3d. Adds to summary (zooms, tiles, triangles, bytes) and writes through `output`.
+void writeTerrainLayer(const std::vector<Level>& levels, std::int32_t max_zoom, const DemOnGlobe& globe,
+                       const FillHeight& fill_height, OutputFormat format, OutputDirectory& output,
+                       BuildSummary& summary, Progress& progress);
 
 }  // namespace terratiles

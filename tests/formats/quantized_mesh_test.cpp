@@ -21,49 +21,6 @@ using namespace terratiles;
 
 namespace {
 
-// A real terrain tile: SRTM N57E011's TIN (or its grid every `grid_step` pixels) in longitude,
-// latitude and the DEM's heights, with the ellipsoid's normals, in the rectangle of its
-// outermost pixel centres (so the raster's border vertices lie on the tile's sides).
-struct RealTile {
-  TerrainTileMesh mesh;
-  std::array<std::set<std::uint32_t>, 4> on_side;  // mesh vertices on the west, south, east, north side
-};
-
-RealTile realTile(double max_error_m, std::int32_t grid_step) {
-  const DemGrid dem = readDem({test::sharedData("srtm3_N57E011_4326.tif")});
-  TinMesh tin;
-  if (grid_step > 0) {
-    tin = triangulateGrid(dem, grid_step);
-  } else {
-    Progress progress;
-    TinOptions options;
-    options.max_error_m = max_error_m;
-    tin = buildTin(dem, options, progress);
-  }
-  RealTile tile;
-  double last_col = 0, last_row = 0;
-  for (const GridPoint& p : tin.vertices) {
-    last_col = std::max(last_col, p.col);
-    last_row = std::max(last_row, p.row);
-  }
-  for (std::uint32_t i = 0; i < tin.vertices.size(); ++i) {
-    const GridPoint& p = tin.vertices[i];
-    const CrsPoint at = dem.pixelCentre(p.col, p.row);
-    tile.mesh.vertices.push_back({at.x, at.y, p.height_m});
-    const double lon = at.x * std::numbers::pi / 180, lat = at.y * std::numbers::pi / 180;
-    tile.mesh.normals.push_back({static_cast<float>(std::cos(lat) * std::cos(lon)),
-                                 static_cast<float>(std::cos(lat) * std::sin(lon)), static_cast<float>(std::sin(lat))});
-    if (p.col == 0) tile.on_side[0].insert(i);
-    if (p.row == last_row) tile.on_side[1].insert(i);
-    if (p.col == last_col) tile.on_side[2].insert(i);
-    if (p.row == 0) tile.on_side[3].insert(i);
-  }
-  const CrsPoint north_west = dem.pixelCentre(0, 0), south_east = dem.pixelCentre(last_col, last_row);
-  tile.mesh.rectangle = {north_west.x, south_east.y, south_east.x, north_west.y};
-  tile.mesh.triangles = tin.triangle_indices;
-  return tile;
-}
-
 void writeFile(const std::string& path, const std::vector<std::uint8_t>& bytes) {
   std::ofstream out(path, std::ios::binary);
   out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
@@ -84,7 +41,7 @@ std::array<double, 3> octDecode(int x, int y) {
 
 // Everything loaders.gl decodes from the tile matches what was encoded, and holds what a
 // client relies on.
-void checkDecoded(const nlohmann::json& got, const RealTile& tile, const DecodedTerrainTile& written,
+void checkDecoded(const nlohmann::json& got, const test::SrtmTerrainTile& tile, const DecodedTerrainTile& written,
                   const std::string& metadata) {
   INFO(got.value("file", std::string()));
   REQUIRE_FALSE(got.contains("error"));
@@ -206,7 +163,7 @@ TEST_CASE("quantized-mesh tiles of a real TIN decode with loaders.gl as written"
   options.metadata_json = metadata;
   // SRTM N57E011's TIN at 5 m (16-bit indices), served gzip'd; its pixel grid every 4th pixel
   // (90601 vertices: 32-bit indices, with the padding before them), not compressed.
-  const RealTile tin = realTile(5, 0), grid = realTile(0, 4);
+  const test::SrtmTerrainTile tin = test::srtmTerrainTile(5, 0), grid = test::srtmTerrainTile(0, 4);
   DecodedTerrainTile tin_written, grid_written;
   const auto tin_bytes = encodeQuantizedMesh(tin.mesh, options, &tin_written);
   const auto grid_bytes = encodeQuantizedMesh(grid.mesh, options, &grid_written);

@@ -55,24 +55,30 @@ std::string buildLayer(const test::TempDir& dir) {
   return out;
 }
 
-// CesiumJS (CesiumTerrainProvider in headless chromium through samples/viewer and
+// CesiumJS (CesiumTerrainProvider or Cesium3DTilesTerrainProvider, as `format` says, in headless chromium through samples/viewer and
 // tools/render_check/terrain_check.mjs, NaturalEarthII draped) takes the layer built from
 // `raster` with `build_args` as its terrain: no tile fails, a clampToGround polyline renders,
 // and sampleTerrainMostDetailed at 200 random valid pixels gives the DEM height plus the
-// geoid within the finest zoom's measured error (layer.json) plus 5 cm: the quantisation of
-// heights (range / 32767: under 1 cm on N57E011, 5 cm at Interlaken's zoom 12) and
-// positions, and the straight triangles' sag, which a client's interpolation in longitude and
+// geoid within the finest zoom's measured error (layer.json or tileset.json) plus 5 cm: the
+// quantisation of heights (range / 32767: under 1 cm on N57E011, 5 cm at Interlaken's zoom 12)
+// and positions, and the straight triangles' sag, which a client's interpolation in longitude and
 // latitude does not follow. A screenshot goes to test-artifacts/`name`.png.
-void checkInCesium(const std::string& raster, const std::vector<std::string>& build_args, const std::string& geoid_path,
-                   const std::string& name) {
+void checkInCesium(const std::string& format, const std::string& raster, const std::vector<std::string>& build_args,
+                   const std::string& geoid_path, const std::string& name) {
   test::TempDir dir;
   const std::string out = dir / "terrain";
-  std::vector<std::string> args{"build", raster, "-o", out, "--format", "quantized-mesh", "-q"};
+  std::vector<std::string> args{"build", raster, "-o", out, "--format", format, "-q"};
   args.insert(args.end(), build_args.begin(), build_args.end());
   const auto built = runTerratiles(args);
   REQUIRE_MESSAGE(built.exit_code == 0, built.err);
-  std::ifstream layer_file(out + "/layer.json");
-  const double bound_m = json::parse(layer_file)["terratiles"]["zooms"].back()["max_error_m"].get<double>() + 0.05;
+  const bool quantized_mesh = format == "quantized-mesh";
+  std::ifstream layer_file(out + (quantized_mesh ? "/layer.json" : "/tileset.json"));
+  const json layer = json::parse(layer_file);
+  const json& zooms = quantized_mesh ? layer["terratiles"]["zooms"] : layer["extras"]["terratiles"]["zooms"];
+  // 3D Tiles terrain adds its position quantisation (the finest zoom's step: half a step up
+  // or down, and half a step's diagonal sideways on slopes up to 1:1.4).
+  const double bound_m = zooms.back()["max_error_m"].get<double>() + 0.05 +
+                         (quantized_mesh ? 0.0 : zooms.back()["position_step_m"].get<double>());
   const DemGrid dem = readDem({raster});
   const GeoidGrid geoid = readGeoidGrid(geoid_path);
   const CrsToWgs84 to_wgs84(dem.crs_wkt);
@@ -301,11 +307,19 @@ TEST_CASE("build --format quantized-mesh refuses what it cannot write, with exit
 }
 
 TEST_CASE("CesiumJS takes the quantized-mesh layers of SRTM N57E011 and Interlaken as its terrain") {
-  checkInCesium(test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"}, "/usr/share/proj/egm96_15.gtx",
-                "srtm_terrain");
+  checkInCesium("quantized-mesh", test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"},
+                "/usr/share/proj/egm96_15.gtx", "srtm_terrain");
   const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
-  checkInCesium(test::sharedData("ch_dhm25_interlaken_25m_2056.tif"), {"--tin-max-error", "1", "--geoid", chgeo},
-                chgeo, "interlaken_terrain");
+  checkInCesium("quantized-mesh", test::sharedData("ch_dhm25_interlaken_25m_2056.tif"),
+                {"--tin-max-error", "1", "--geoid", chgeo}, chgeo, "interlaken_terrain");
+}
+
+TEST_CASE("CesiumJS takes the 3D Tiles terrain of SRTM N57E011 and Interlaken as its terrain") {
+  checkInCesium("terrain", test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"},
+                "/usr/share/proj/egm96_15.gtx", "srtm_terrain_3dtiles");
+  const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
+  checkInCesium("terrain", test::sharedData("ch_dhm25_interlaken_25m_2056.tif"),
+                {"--tin-max-error", "1", "--geoid", chgeo}, chgeo, "interlaken_terrain_3dtiles");
 }
 
 TEST_CASE("build --format quantized-mesh --fill ETOPO5: outside the data, ETOPO5's heights above EGM96") {

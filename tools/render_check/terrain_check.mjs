@@ -1,11 +1,12 @@
 #!/usr/bin/env node
 // Terrain check: CesiumJS (samples/viewer, headless Debian chromium) takes a terratiles
-// quantized-mesh layer as the globe's terrain (CesiumTerrainProvider) with the bundled
+// terrain layer as the globe's terrain (quantized-mesh: CesiumTerrainProvider; 3D Tiles
+// terrain: Cesium3DTilesTerrainProvider) with the bundled
 // NaturalEarthII imagery draped on it, then samples it and draws a polyline clamped to it.
 //
 //   node tools/render_check/terrain_check.mjs OUTDIR --points FILE [options]
 //
-// OUTDIR holds layer.json. FILE is JSON: [[lon, lat], ...] degrees. Prints (and with --json
+// OUTDIR holds layer.json or a 3D Tiles terrain tileset.json. FILE is JSON: [[lon, lat], ...] degrees. Prints (and with --json
 // writes) one JSON object: ready (the first view's tiles all loaded), error, failedTiles,
 // consoleErrors, httpErrors, heights (sampleTerrainMostDetailed at the points: metres above
 // the ellipsoid, null where there is no terrain), polyline (the clamped polyline's state after
@@ -47,7 +48,9 @@ for (let i = 0; i < argv.length; i++) {
   else usage(`unexpected argument ${a}`);
 }
 if (!opts.outDir || !opts.points) usage('OUTDIR and --points are required');
-if (!fs.existsSync(path.join(opts.outDir, 'layer.json'))) usage(`no layer.json in ${opts.outDir}`);
+if (!fs.existsSync(path.join(opts.outDir, 'layer.json')) && !fs.existsSync(path.join(opts.outDir, 'tileset.json'))) {
+  usage(`no layer.json or tileset.json in ${opts.outDir}`);
+}
 if (!fs.existsSync(opts.chromium)) usage(`browser not found at ${opts.chromium} (apt-get install -y chromium)`);
 const points = JSON.parse(fs.readFileSync(opts.points, 'utf8'));
 

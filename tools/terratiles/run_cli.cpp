@@ -120,13 +120,14 @@ std::string humanBytes(std::size_t bytes) {
 void printJsonSummary(const BuildSummary& s, std::ostream& err) {
   nlohmann::json j;
   j["event"] = "summary";
-  j[s.entry_file == "layer.json" ? "layer" : "tileset"] = s.output_dir + "/" + s.entry_file;
+  j[s.format == OutputFormat::QuantizedMesh ? "layer" : "tileset"] = s.output_dir + "/" + s.entry_file;
+  j["format"] = outputFormatName(s.format);
   j["report"] = s.report_path;
   j["tiles"] = s.tiles;
   j["triangles"] = s.triangles;
   j["bytes"] = s.tile_bytes;        // the tiles
   j["bytes_written"] = s.bytes;     // every file, reports included
-  const bool terrain = s.entry_file == "layer.json";
+  const bool terrain = isTerrainLayer(s.format);
   j["worst_error_m"] = s.worst_error_m;
   if (terrain) j["fill"] = s.terrain_fill;
   j["seconds"] = s.seconds;
@@ -147,7 +148,7 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
   text << "  placed   " << s.placement << "; geoid " << s.geoid << "\n";
   if (!s.blocks.empty()) text << "  blocks   " << s.blocks << "\n";
   for (const std::string& warning : s.warnings) text << "  warning  " << warning << "\n";
-  if (s.entry_file == "layer.json") {
+  if (isTerrainLayer(s.format)) {
     text << "  zoom  tiles   triangles  tile triangles        bytes  B/tri   max err m   rms err m  client err m\n";
     for (const ZoomSummary& z : s.zooms) {
       text << "  " << std::setw(4) << z.zoom << std::setw(7) << z.tiles << std::setw(12) << z.triangles << std::setw(16)
@@ -156,12 +157,14 @@ void printSummary(const BuildSummary& s, std::ostream& err) {
            << std::setprecision(3) << std::setw(12) << z.max_error_m << std::setw(12) << z.rms_error_m
            << std::setprecision(1) << std::setw(14) << z.geometric_error_m << "\n";
     }
-    text << "  total " << s.tiles << " tiles (gzip'd quantized-mesh, the whole globe at zoom 0), "
+    text << "  total " << s.tiles << " tiles ("
+         << (s.format == OutputFormat::QuantizedMesh ? "gzip'd quantized-mesh" : "3D Tiles terrain, meshopt GLB")
+         << ", the whole globe at zoom 0), "
          << humanBytes(s.tile_bytes) << ", worst measured error " << std::setprecision(2) << s.worst_error_m
          << " m, " << s.seconds << " s\n";
     text << "  fill     " << s.terrain_fill << "\n";
     text << "  errors   each zoom's level against the DEM (as drawn, every valid pixel; the fill is not "
-            "measured); client err: what CesiumTerrainProvider assumes; no report\n";
+            "measured); client err: what CesiumJS's terrain providers assume; no report\n";
     err << text.str() << std::flush;
     return;
   }
@@ -809,13 +812,15 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
   std::string format_choice = "tileset";
   build_command
       ->add_option("--format", format_choice,
-                   "What to write: tileset (3D Tiles: tileset.json and Draco GLB tiles) or quantized-mesh (a "
+                   "What to write: tileset (3D Tiles: tileset.json and Draco GLB tiles), quantized-mesh (a "
                    "quantized-mesh-1.0 terrain layer, layer.json and gzip'd {z}/{x}/{y}.terrain tiles, that "
-                   "CesiumJS's CesiumTerrainProvider takes as the globe's terrain; the geographic scheme)")
-      ->check(CLI::IsMember({"tileset", "quantized-mesh"}))
+                   "CesiumJS's CesiumTerrainProvider takes as the globe's terrain) or terrain (3D Tiles terrain: "
+                   "implicit quadtrees of meshopt GLBs with tile edges, for Cesium3DTilesTerrainProvider); both "
+                   "terrain layers use the geographic scheme")
+      ->check(CLI::IsMember({"tileset", "quantized-mesh", "terrain"}))
       ->capture_default_str();
   build_command->add_option("--fill", build.fill_dem,
-                            "--format quantized-mesh: outside the data, the terrain of this raster (WGS84 longitude "
+                            "--format quantized-mesh or terrain: outside the data, the terrain of this raster (WGS84 longitude "
                             "and latitude, heights as --heights says, e.g. ETOPO5) instead of the geoid surface");
   build_command
       ->add_option("--lod", lod_choice,
@@ -1179,9 +1184,11 @@ int runCliOrThrow(const std::vector<std::string>& args, std::istream& in, std::o
     build.simplifier = parseSimplifier(build_simplifier);
     build.tail_stop = parseTailStop(build_tail_stop);
     build.global_partition = build_partition == "global";
-    build.format = format_choice == "quantized-mesh" ? OutputFormat::QuantizedMesh : OutputFormat::Tileset;
-    // quantized-mesh tiles are the geographic quadtree's: its scheme unless one is asked for.
-    if (build.format == OutputFormat::QuantizedMesh && build_command->count("--scheme") == 0) {
+    build.format = format_choice == "quantized-mesh" ? OutputFormat::QuantizedMesh
+                   : format_choice == "terrain"      ? OutputFormat::TerrainTiles3d
+                                                     : OutputFormat::Tileset;
+    // Terrain tiles are the geographic quadtree's: its scheme unless one is asked for.
+    if (isTerrainLayer(build.format) && build_command->count("--scheme") == 0) {
       scheme_choice = "geographic";
     }
     build.scheme = parseTileSchemeKind(scheme_choice);
