@@ -2,6 +2,7 @@
 
 #include <doctest/doctest.h>
 #include <gdal_priv.h>
+#include <meshoptimizer.h>
 #include <ogr_spatialref.h>
 #include <stdlib.h>
 
@@ -14,6 +15,8 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+
+#include <cstring>
 
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
@@ -379,6 +382,228 @@ SrtmTerrainTile srtmTerrainTile(double max_error_m, std::int32_t grid_step) {
   const CrsPoint north_west = dem.pixelCentre(0, 0), south_east = dem.pixelCentre(last_col, last_row);
   tile.mesh.rectangle = {north_west.x, south_east.y, south_east.x, north_west.y};
   tile.mesh.triangles = tin.triangle_indices;
+  return tile;
+}
+
+std::uint64_t readLittleEndian(const std::vector<std::uint8_t>& bytes, std::size_t offset,
+                               int size) {
+  std::uint64_t value = 0;
+  for (int i = size - 1; i >= 0; --i) value = value * 256 + bytes.at(offset + i);
+  return value;
+}
+
+// Checks the binary subtree layout (spec "Subtree Binary Format") and splits it.
+Subtree decodeSubtree(const std::vector<std::uint8_t>& bytes) {
+  REQUIRE(bytes.size() >= 24);
+  CHECK(std::string(bytes.begin(), bytes.begin() + 4) == "subt");
+  CHECK(readLittleEndian(bytes, 4, 4) == 1);
+  const std::uint64_t json_length = readLittleEndian(bytes, 8, 8);
+  const std::uint64_t binary_length = readLittleEndian(bytes, 16, 8);
+  CHECK(json_length % 8 == 0);
+  CHECK(binary_length % 8 == 0);
+  REQUIRE(24 + json_length + binary_length == bytes.size());
+  Subtree subtree;
+  const std::string text(bytes.begin() + 24, bytes.begin() + 24 + json_length);
+  subtree.json = nlohmann::json::parse(text);
+  subtree.binary.assign(bytes.begin() + 24 + json_length, bytes.end());
+  // One internal buffer (no uri): the binary chunk.
+  REQUIRE(subtree.json["buffers"].size() == 1);
+  CHECK_FALSE(subtree.json["buffers"][0].contains("uri"));
+  CHECK(subtree.json["buffers"][0]["byteLength"] == binary_length);
+  for (const nlohmann::json& view : subtree.json["bufferViews"]) {
+    CHECK(view["buffer"] == 0);
+    CHECK(view["byteOffset"].get<std::uint64_t>() % 8 == 0);
+    CHECK(view["byteOffset"].get<std::uint64_t>() + view["byteLength"].get<std::uint64_t>() <=
+          binary_length);
+  }
+  return subtree;
+}
+
+std::span<const std::uint8_t> viewBytes(const Subtree& subtree, std::size_t view) {
+  const nlohmann::json& json = subtree.json["bufferViews"].at(view);
+  return std::span<const std::uint8_t>(subtree.binary)
+      .subspan(json["byteOffset"].get<std::size_t>(), json["byteLength"].get<std::size_t>());
+}
+
+// Bit `index` of an availability of `length_bits` bits: a constant or a bitstream of
+// exactly ceil(length_bits / 8) bytes, least significant bit first, trailing bits 0.
+bool availabilityBit(const Subtree& subtree, const nlohmann::json& availability,
+                     std::uint64_t length_bits, std::uint64_t index) {
+  if (availability.contains("constant")) {
+    CHECK_FALSE(availability.contains("bitstream"));
+    return availability["constant"] == 1;
+  }
+  const auto bytes = viewBytes(subtree, availability["bitstream"].get<std::size_t>());
+  REQUIRE(bytes.size() == (length_bits + 7) / 8);
+  if (index == 0 && length_bits % 8 != 0) {
+    CHECK((bytes.back() >> (length_bits % 8)) == 0);
+  }
+  return ((bytes[index / 8] >> (index % 8)) & 1) != 0;
+}
+
+double float64At(const Subtree& subtree, std::size_t view, std::size_t element) {
+  const auto bytes = viewBytes(subtree, view);
+  REQUIRE((element + 1) * 8 <= bytes.size());
+  double value = 0;
+  std::memcpy(&value, bytes.data() + element * 8, 8);  // the test host is little-endian
+  return value;
+}
+
+// Column and row of a Morton index within its level: x takes the even bits, y the odd.
+std::pair<std::int64_t, std::int64_t> fromMorton(std::uint64_t morton, int level) {
+  std::int64_t x = 0;
+  std::int64_t y = 0;
+  for (int bit = level - 1; bit >= 0; --bit) {
+    x = 2 * x + static_cast<std::int64_t>((morton >> (2 * bit)) & 1);
+    y = 2 * y + static_cast<std::int64_t>((morton >> (2 * bit + 1)) & 1);
+  }
+  return {x, y};
+}
+
+ImplicitTiles readImplicitTiles(const std::function<std::vector<std::uint8_t>(const std::string&)>& file,
+                                const std::string& hemisphere, int subtree_levels,
+                                const std::map<std::string, std::size_t>& property_components,
+                                std::set<std::string>& read) {
+  ImplicitTiles tiles;
+  std::uint64_t tile_bits = 0;
+  for (int level = 0; level < subtree_levels; ++level) tile_bits += std::uint64_t{1} << (2 * level);
+  const std::uint64_t child_bits = std::uint64_t{1} << (2 * subtree_levels);
+  std::vector<std::tuple<int, std::int64_t, std::int64_t>> open{{0, 0, 0}};
+  while (!open.empty()) {
+    const auto [root_level, root_x, root_y] = open.back();
+    open.pop_back();
+    const std::string path = "subtrees/" + hemisphere + "/" + std::to_string(root_level) + "/" +
+                             std::to_string(root_x) + "/" + std::to_string(root_y) + ".subtree";
+    INFO(path);
+    CHECK(read.insert(path).second);
+    const Subtree subtree = decodeSubtree(file(path));
+    const nlohmann::json& json = subtree.json;
+    const nlohmann::json& table = json["propertyTables"].at(json["tileMetadata"].get<std::size_t>());
+    CHECK(table["class"] == "tile");
+    const bool has_content = json.contains("contentAvailability");
+    // A subtree's root tile is available (it was reached as an available child subtree).
+    CHECK(availabilityBit(subtree, json["tileAvailability"], tile_bits, 0));
+
+    std::uint64_t bit = 0;
+    std::size_t entity = 0;
+    for (int level = 0; level < subtree_levels; ++level) {
+      for (std::uint64_t morton = 0; morton < (std::uint64_t{1} << (2 * level)); ++morton, ++bit) {
+        const bool available = availabilityBit(subtree, json["tileAvailability"], tile_bits, bit);
+        const bool content = has_content && availabilityBit(subtree, json["contentAvailability"][0], tile_bits, bit);
+        CHECK((available || !content));
+        if (!available) continue;
+        const auto [x, y] = fromMorton(morton, level);
+        ImplicitTileRead tile;
+        tile.content = content;
+        for (const auto& [name, components] : property_components) {
+          const std::size_t view = table["properties"][name]["values"];
+          for (std::size_t i = 0; i < components; ++i) {
+            tile.properties[name].push_back(float64At(subtree, view, components * entity + i));
+          }
+        }
+        ++entity;
+        const ImplicitTileCoordinates c{hemisphere == "east" ? 1 : 0, root_level + level, (root_x << level) + x,
+                                        (root_y << level) + y};
+        CHECK(tiles.emplace(c, std::move(tile)).second);
+      }
+    }
+    CHECK(table["count"] == entity);
+    for (const auto& [name, components] : property_components) {
+      CHECK(viewBytes(subtree, table["properties"][name]["values"]).size() == 8 * components * entity);
+    }
+    for (std::uint64_t morton = 0; morton < child_bits; ++morton) {
+      if (!availabilityBit(subtree, json["childSubtreeAvailability"], child_bits, morton)) continue;
+      const auto [x, y] = fromMorton(morton, subtree_levels);
+      open.emplace_back(root_level + subtree_levels, (root_x << subtree_levels) + x, (root_y << subtree_levels) + y);
+    }
+  }
+  return tiles;
+}
+
+namespace {
+std::uint32_t readUint32LittleEndian(const std::vector<std::uint8_t>& bytes, std::size_t at) {
+  return bytes[at] | bytes[at + 1] << 8 | bytes[at + 2] << 16 | static_cast<std::uint32_t>(bytes[at + 3]) << 24;
+}
+
+}  // namespace
+
+ParsedGlb parseGlb(const std::vector<std::uint8_t>& bytes) {
+  REQUIRE(bytes.size() >= 28);
+  REQUIRE(readUint32LittleEndian(bytes, 0) == 0x46546C67u);
+  REQUIRE(readUint32LittleEndian(bytes, 4) == 2);
+  REQUIRE(readUint32LittleEndian(bytes, 8) == bytes.size());
+  const std::uint32_t json_length = readUint32LittleEndian(bytes, 12);
+  REQUIRE(readUint32LittleEndian(bytes, 16) == 0x4E4F534Au);
+  REQUIRE(json_length % 4 == 0);
+  ParsedGlb glb;
+  glb.gltf = nlohmann::json::parse(bytes.begin() + 20, bytes.begin() + 20 + json_length);
+  const std::size_t bin = 20 + json_length;
+  REQUIRE(readUint32LittleEndian(bytes, bin + 4) == 0x004E4942u);
+  glb.binary.assign(bytes.begin() + static_cast<std::ptrdiff_t>(bin + 8),
+                    bytes.begin() + static_cast<std::ptrdiff_t>(bin + 8 + readUint32LittleEndian(bytes, bin)));
+  REQUIRE(bin + 8 + glb.binary.size() == bytes.size());
+  return glb;
+}
+
+// An accessor's elements decoded from its view's EXT_meshopt_compression data, without the
+// filter (as CesiumJS reads them): count x byteStride bytes.
+std::vector<std::uint8_t> decodeView(const ParsedGlb& glb, std::size_t accessor_index) {
+  const nlohmann::json& accessor = glb.gltf["accessors"][accessor_index];
+  const nlohmann::json& meshopt = glb.gltf["bufferViews"][accessor["bufferView"].get<std::size_t>()]["extensions"]
+                                ["EXT_meshopt_compression"];
+  REQUIRE(meshopt["buffer"] == 0);
+  const std::size_t count = meshopt["count"], stride = meshopt["byteStride"];
+  CHECK(count == accessor["count"].get<std::size_t>());
+  const std::uint8_t* data = glb.binary.data() + meshopt["byteOffset"].get<std::size_t>();
+  const std::size_t size = meshopt["byteLength"];
+  std::vector<std::uint8_t> out(count * stride);
+  int status = -1;
+  if (meshopt["mode"] == "ATTRIBUTES") status = meshopt_decodeVertexBuffer(out.data(), count, stride, data, size);
+  if (meshopt["mode"] == "TRIANGLES") status = meshopt_decodeIndexBuffer(out.data(), count, stride, data, size);
+  if (meshopt["mode"] == "INDICES") status = meshopt_decodeIndexSequence(out.data(), count, stride, data, size);
+  REQUIRE(status == 0);
+  return out;
+}
+
+std::vector<std::uint32_t> indicesOf(const ParsedGlb& glb, std::size_t accessor_index) {
+  const std::vector<std::uint8_t> raw = decodeView(glb, accessor_index);
+  const bool short_indices = glb.gltf["accessors"][accessor_index]["componentType"] == 5123;
+  std::vector<std::uint32_t> indices(raw.size() / (short_indices ? 2 : 4));
+  for (std::size_t i = 0; i < indices.size(); ++i) {
+    indices[i] = short_indices ? static_cast<std::uint32_t>(raw[2 * i] | raw[2 * i + 1] << 8) : readUint32LittleEndian(raw, 4 * i);
+  }
+  return indices;
+}
+
+// The node matrix after CesiumJS's Y-up to Z-up turn, (x, y, z) -> (x, -z, y): rows of 4.
+std::array<std::array<double, 4>, 3> tileTransform(const nlohmann::json& gltf) {
+  const nlohmann::json& m = gltf["nodes"][0]["matrix"];  // column-major
+  std::array<std::array<double, 4>, 3> t{};
+  for (int column = 0; column < 4; ++column) {
+    t[0][column] = m[4 * column + 0];
+    t[1][column] = -m[4 * column + 2].get<double>();
+    t[2][column] = m[4 * column + 1];
+  }
+  return t;
+}
+
+TerrainGlbRead readTerrainGlb(const std::vector<std::uint8_t>& bytes) {
+  TerrainGlbRead tile;
+  tile.glb = parseGlb(bytes);
+  const nlohmann::json& primitive = tile.glb.gltf["meshes"][0]["primitives"][0];
+  const std::vector<std::uint8_t> raw = decodeView(tile.glb, primitive["attributes"]["POSITION"]);
+  const auto t = tileTransform(tile.glb.gltf);
+  tile.positions.resize(raw.size() / 8);
+  for (std::size_t i = 0; i < tile.positions.size(); ++i) {
+    double f[3];
+    for (int a = 0; a < 3; ++a) f[a] = static_cast<float>((raw[8 * i + 2 * a] | raw[8 * i + 2 * a + 1] << 8) / 65535.0);
+    double p[3];
+    for (int r = 0; r < 3; ++r) p[r] = t[r][0] * f[0] + t[r][1] * f[1] + t[r][2] * f[2] + t[r][3];
+    tile.positions[i] = {p[0], p[1], p[2]};
+  }
+  tile.triangles = indicesOf(tile.glb, primitive["indices"]);
+  const char* names[4] = {"left", "bottom", "right", "top"};
+  for (int side = 0; side < 4; ++side) tile.edges[side] = indicesOf(tile.glb, primitive["extensions"]["CESIUM_tile_edges"][names[side]]);
   return tile;
 }
 

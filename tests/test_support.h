@@ -7,6 +7,8 @@
 #include <functional>
 #include <map>
 #include <set>
+#include <span>
+#include <tuple>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -15,6 +17,7 @@
 #include "src/geo/crs_transform.h"
 #include "src/pipeline/check_output.h"
 #include "src/tiling/clip_to_tile.h"
+#include "tileset/implicit_tileset.h"
 #include "src/tin/measure_tin.h"
 
 namespace terratiles::test {
@@ -121,6 +124,62 @@ struct SrtmTerrainTile {
   std::array<std::set<std::uint32_t>, 4> on_side;  // mesh vertices on the west, south, east, north side
 };
 SrtmTerrainTile srtmTerrainTile(double max_error_m, std::int32_t grid_step);
+
+// Implicit tiling read back: the binary subtree layout (spec "Subtree Binary Format") checked
+// and split, a view's bytes, availability bits, FLOAT64 property values.
+struct Subtree {
+  nlohmann::json json;
+  std::vector<std::uint8_t> binary;
+};
+Subtree decodeSubtree(const std::vector<std::uint8_t>& bytes);
+std::span<const std::uint8_t> viewBytes(const Subtree& subtree, std::size_t view);
+// Bit `index` of an availability of `length_bits` bits: a constant or a bitstream of exactly
+// ceil(length_bits / 8) bytes, least significant bit first, trailing bits 0.
+bool availabilityBit(const Subtree& subtree, const nlohmann::json& availability, std::uint64_t length_bits,
+                     std::uint64_t index);
+double float64At(const Subtree& subtree, std::size_t view, std::size_t element);
+
+// Every available tile of one hemisphere ("west", "east") and its FLOAT64 tile properties
+// (name -> values per tile), read by walking its subtrees from the root subtree through child
+// subtree availability; `file` gives a subtree's bytes by its path, `read` collects the paths.
+struct ImplicitTileRead {
+  bool content = false;
+  std::map<std::string, std::vector<double>> properties;
+};
+struct ImplicitTileOrder {
+  bool operator()(const ImplicitTileCoordinates& a, const ImplicitTileCoordinates& b) const {
+    return std::tie(a.hemisphere, a.level, a.x, a.y) < std::tie(b.hemisphere, b.level, b.x, b.y);
+  }
+};
+using ImplicitTiles = std::map<ImplicitTileCoordinates, ImplicitTileRead, ImplicitTileOrder>;
+ImplicitTiles readImplicitTiles(const std::function<std::vector<std::uint8_t>(const std::string&)>& file,
+                                const std::string& hemisphere, int subtree_levels,
+                                const std::map<std::string, std::size_t>& property_components,
+                                std::set<std::string>& read);
+
+// A GLB read back: its JSON and binary chunks (the layout checked).
+struct ParsedGlb {
+  nlohmann::json gltf;
+  std::vector<std::uint8_t> binary;
+};
+ParsedGlb parseGlb(const std::vector<std::uint8_t>& bytes);
+// An accessor's elements decoded from its view's EXT_meshopt_compression data, without the
+// filter (as CesiumJS reads them): count x byteStride bytes.
+std::vector<std::uint8_t> decodeView(const ParsedGlb& glb, std::size_t accessor_index);
+// An index accessor (meshopt-coded, 16 or 32 bits) decoded.
+std::vector<std::uint32_t> indicesOf(const ParsedGlb& glb, std::size_t accessor_index);
+// The first node's matrix after CesiumJS's Y-up to Z-up turn, (x, y, z) -> (x, -z, y): 3 rows.
+std::array<std::array<double, 4>, 3> tileTransform(const nlohmann::json& gltf);
+// A 3D Tiles terrain tile (encodeTerrainGlb's layout) decoded as Cesium3DTilesTerrainProvider
+// decodes it: ECEF positions (value / 65535 as a float, then the matrix), triangles, and the
+// CESIUM_tile_edges lists (west, south, east, north).
+struct TerrainGlbRead {
+  ParsedGlb glb;
+  std::vector<EcefPoint> positions;
+  std::vector<std::uint32_t> triangles;
+  std::array<std::vector<std::uint32_t>, 4> edges;
+};
+TerrainGlbRead readTerrainGlb(const std::vector<std::uint8_t>& bytes);
 
 struct HorizonCulling {
   std::size_t cameras_seeing = 0;

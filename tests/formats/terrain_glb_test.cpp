@@ -20,77 +20,12 @@
 
 using namespace terratiles;
 using nlohmann::json;
+using test::decodeView;
+using test::parseGlb;
+using test::ParsedGlb;
+using test::tileTransform;
 
 namespace {
-
-std::uint32_t readUint32(const std::vector<std::uint8_t>& bytes, std::size_t at) {
-  return bytes[at] | bytes[at + 1] << 8 | bytes[at + 2] << 16 | static_cast<std::uint32_t>(bytes[at + 3]) << 24;
-}
-
-struct ParsedGlb {
-  json gltf;
-  std::vector<std::uint8_t> binary;
-};
-
-ParsedGlb parseGlb(const std::vector<std::uint8_t>& bytes) {
-  REQUIRE(bytes.size() >= 28);
-  REQUIRE(readUint32(bytes, 0) == 0x46546C67u);
-  REQUIRE(readUint32(bytes, 4) == 2);
-  REQUIRE(readUint32(bytes, 8) == bytes.size());
-  const std::uint32_t json_length = readUint32(bytes, 12);
-  REQUIRE(readUint32(bytes, 16) == 0x4E4F534Au);
-  REQUIRE(json_length % 4 == 0);
-  ParsedGlb glb;
-  glb.gltf = json::parse(bytes.begin() + 20, bytes.begin() + 20 + json_length);
-  const std::size_t bin = 20 + json_length;
-  REQUIRE(readUint32(bytes, bin + 4) == 0x004E4942u);
-  glb.binary.assign(bytes.begin() + static_cast<std::ptrdiff_t>(bin + 8),
-                    bytes.begin() + static_cast<std::ptrdiff_t>(bin + 8 + readUint32(bytes, bin)));
-  REQUIRE(bin + 8 + glb.binary.size() == bytes.size());
-  return glb;
-}
-
-// An accessor's elements decoded from its view's EXT_meshopt_compression data, without the
-// filter (as CesiumJS reads them): count x byteStride bytes.
-std::vector<std::uint8_t> decodeView(const ParsedGlb& glb, std::size_t accessor_index) {
-  const json& accessor = glb.gltf["accessors"][accessor_index];
-  const json& meshopt = glb.gltf["bufferViews"][accessor["bufferView"].get<std::size_t>()]["extensions"]
-                                ["EXT_meshopt_compression"];
-  REQUIRE(meshopt["buffer"] == 0);
-  const std::size_t count = meshopt["count"], stride = meshopt["byteStride"];
-  CHECK(count == accessor["count"].get<std::size_t>());
-  const std::uint8_t* data = glb.binary.data() + meshopt["byteOffset"].get<std::size_t>();
-  const std::size_t size = meshopt["byteLength"];
-  std::vector<std::uint8_t> out(count * stride);
-  int status = -1;
-  if (meshopt["mode"] == "ATTRIBUTES") status = meshopt_decodeVertexBuffer(out.data(), count, stride, data, size);
-  if (meshopt["mode"] == "TRIANGLES") status = meshopt_decodeIndexBuffer(out.data(), count, stride, data, size);
-  if (meshopt["mode"] == "INDICES") status = meshopt_decodeIndexSequence(out.data(), count, stride, data, size);
-  REQUIRE(status == 0);
-  return out;
-}
-
-std::vector<std::uint32_t> indicesOf(const ParsedGlb& glb, std::size_t accessor_index) {
-  const std::vector<std::uint8_t> raw = decodeView(glb, accessor_index);
-  const bool short_indices = glb.gltf["accessors"][accessor_index]["componentType"] == 5123;
-  std::vector<std::uint32_t> indices(raw.size() / (short_indices ? 2 : 4));
-  for (std::size_t i = 0; i < indices.size(); ++i) {
-    indices[i] = short_indices ? static_cast<std::uint32_t>(raw[2 * i] | raw[2 * i + 1] << 8) : readUint32(raw, 4 * i);
-  }
-  return indices;
-}
-
-// The node matrix after CesiumJS's Y-up to Z-up turn, (x, y, z) -> (x, -z, y): rows of 4.
-std::array<std::array<double, 4>, 3> tileTransform(const json& gltf) {
-  const json& m = gltf["nodes"][0]["matrix"];  // column-major
-  std::array<std::array<double, 4>, 3> t{};
-  for (int column = 0; column < 4; ++column) {
-    t[0][column] = m[4 * column + 0];
-    t[1][column] = -m[4 * column + 2].get<double>();
-    t[2][column] = m[4 * column + 1];
-  }
-  return t;
-}
 
 double distance(const EcefPoint& a, const EcefPoint& b) {
   return std::sqrt((a.x - b.x) * (a.x - b.x) + (a.y - b.y) * (a.y - b.y) + (a.z - b.z) * (a.z - b.z));
@@ -130,19 +65,18 @@ void checkTile(const test::SrtmTerrainTile& tile, const std::string& name) {
   std::vector<EcefPoint> source_ecef(count);
   geodeticToEcef(source, source_ecef);
   std::array<std::uint32_t, 3> q_min{65535, 65535, 65535}, q_max{0, 0, 0};
-  double worst_m = 0, worst_written_m = 0;
-  std::vector<EcefPoint> positions(count);
   for (std::size_t i = 0; i < count; ++i) {
-    double f[3];
     for (int a = 0; a < 3; ++a) {
       const std::uint32_t q = raw[8 * i + 2 * a] | raw[8 * i + 2 * a + 1] << 8;
       q_min[a] = std::min(q_min[a], q);
       q_max[a] = std::max(q_max[a], q);
-      f[a] = static_cast<float>(q / 65535.0);
     }
-    double p[3];
-    for (int r = 0; r < 3; ++r) p[r] = t[r][0] * f[0] + t[r][1] * f[1] + t[r][2] * f[2] + t[r][3];
-    positions[i] = {p[0], p[1], p[2]};
+  }
+  const test::TerrainGlbRead read = test::readTerrainGlb(result.bytes);
+  const std::vector<EcefPoint>& positions = read.positions;
+  REQUIRE(positions.size() == count);
+  double worst_m = 0, worst_written_m = 0;
+  for (std::size_t i = 0; i < count; ++i) {
     worst_m = std::max(worst_m, distance(positions[i], source_ecef[i]));
     worst_written_m = std::max(worst_written_m, distance(positions[i], written.positions[i]));
   }
@@ -155,7 +89,7 @@ void checkTile(const test::SrtmTerrainTile& tile, const std::string& name) {
 
   // Triangles: the mesh's, each with its winding, in the written vertex order (the index
   // codec may start a triangle at another of its corners).
-  const std::vector<std::uint32_t> triangles = indicesOf(glb, primitive["indices"]);
+  const std::vector<std::uint32_t>& triangles = read.triangles;
   REQUIRE(triangles.size() == written.triangles.size());
   std::size_t differing = 0;
   for (std::size_t i = 0; i + 2 < triangles.size(); i += 3) {
@@ -179,7 +113,7 @@ void checkTile(const test::SrtmTerrainTile& tile, const std::string& name) {
   const char* names[4] = {"left", "bottom", "right", "top"};
   for (int side = 0; side < 4; ++side) {
     CAPTURE(names[side]);
-    const std::vector<std::uint32_t> edge = indicesOf(glb, primitive["extensions"]["CESIUM_tile_edges"][names[side]]);
+    const std::vector<std::uint32_t>& edge = read.edges[side];
     CHECK(edge == written.edges[side]);
     std::set<std::uint32_t> on_side;
     for (const std::uint32_t v : edge) on_side.insert(written.source_vertex[v]);

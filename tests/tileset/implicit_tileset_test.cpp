@@ -14,9 +14,14 @@
 #include <nlohmann/json.hpp>
 
 #include "src/base/error.h"
+#include "tests/test_support.h"
 #include "tileset/implicit_tileset.h"
 
 using namespace terratiles;
+using test::decodeSubtree;
+using test::float64At;
+using test::Subtree;
+using test::viewBytes;
 
 namespace {
 
@@ -127,45 +132,6 @@ void expectedTiles(const TileNode& node, TileMap& out) {
 
 // ---- Reading the output back, independently of the writer ----------------------------------
 
-std::uint64_t readLittleEndian(const std::vector<std::uint8_t>& bytes, std::size_t offset,
-                               int size) {
-  std::uint64_t value = 0;
-  for (int i = size - 1; i >= 0; --i) value = value * 256 + bytes.at(offset + i);
-  return value;
-}
-
-struct Subtree {
-  nlohmann::json json;
-  std::vector<std::uint8_t> binary;
-};
-
-// Checks the binary subtree layout (spec "Subtree Binary Format") and splits it.
-Subtree decodeSubtree(const std::vector<std::uint8_t>& bytes) {
-  REQUIRE(bytes.size() >= 24);
-  CHECK(std::string(bytes.begin(), bytes.begin() + 4) == "subt");
-  CHECK(readLittleEndian(bytes, 4, 4) == 1);
-  const std::uint64_t json_length = readLittleEndian(bytes, 8, 8);
-  const std::uint64_t binary_length = readLittleEndian(bytes, 16, 8);
-  CHECK(json_length % 8 == 0);
-  CHECK(binary_length % 8 == 0);
-  REQUIRE(24 + json_length + binary_length == bytes.size());
-  Subtree subtree;
-  const std::string text(bytes.begin() + 24, bytes.begin() + 24 + json_length);
-  subtree.json = nlohmann::json::parse(text);
-  subtree.binary.assign(bytes.begin() + 24 + json_length, bytes.end());
-  // One internal buffer (no uri): the binary chunk.
-  REQUIRE(subtree.json["buffers"].size() == 1);
-  CHECK_FALSE(subtree.json["buffers"][0].contains("uri"));
-  CHECK(subtree.json["buffers"][0]["byteLength"] == binary_length);
-  for (const nlohmann::json& view : subtree.json["bufferViews"]) {
-    CHECK(view["buffer"] == 0);
-    CHECK(view["byteOffset"].get<std::uint64_t>() % 8 == 0);
-    CHECK(view["byteOffset"].get<std::uint64_t>() + view["byteLength"].get<std::uint64_t>() <=
-          binary_length);
-  }
-  return subtree;
-}
-
 const std::vector<std::uint8_t>& fileBytes(const std::vector<ImplicitFile>& files,
                                            const std::string& path) {
   for (const ImplicitFile& file : files) {
@@ -189,106 +155,23 @@ nlohmann::json tilesetJson(const std::vector<ImplicitFile>& files) {
   return nlohmann::json::parse(std::string(files[0].bytes.begin(), files[0].bytes.end()));
 }
 
-std::span<const std::uint8_t> viewBytes(const Subtree& subtree, std::size_t view) {
-  const nlohmann::json& json = subtree.json["bufferViews"].at(view);
-  return std::span<const std::uint8_t>(subtree.binary)
-      .subspan(json["byteOffset"].get<std::size_t>(), json["byteLength"].get<std::size_t>());
-}
-
-// Bit `index` of an availability of `length_bits` bits: a constant or a bitstream of
-// exactly ceil(length_bits / 8) bytes, least significant bit first, trailing bits 0.
-bool availabilityBit(const Subtree& subtree, const nlohmann::json& availability,
-                     std::uint64_t length_bits, std::uint64_t index) {
-  if (availability.contains("constant")) {
-    CHECK_FALSE(availability.contains("bitstream"));
-    return availability["constant"] == 1;
-  }
-  const auto bytes = viewBytes(subtree, availability["bitstream"].get<std::size_t>());
-  REQUIRE(bytes.size() == (length_bits + 7) / 8);
-  if (index == 0 && length_bits % 8 != 0) {
-    CHECK((bytes.back() >> (length_bits % 8)) == 0);
-  }
-  return ((bytes[index / 8] >> (index % 8)) & 1) != 0;
-}
-
-double float64At(const Subtree& subtree, std::size_t view, std::size_t element) {
-  const auto bytes = viewBytes(subtree, view);
-  REQUIRE((element + 1) * 8 <= bytes.size());
-  double value = 0;
-  std::memcpy(&value, bytes.data() + element * 8, 8);  // the test host is little-endian
-  return value;
-}
-
-// Column and row of a Morton index within its level: x takes the even bits, y the odd.
-std::pair<std::int64_t, std::int64_t> fromMorton(std::uint64_t morton, int level) {
-  std::int64_t x = 0;
-  std::int64_t y = 0;
-  for (int bit = level - 1; bit >= 0; --bit) {
-    x = 2 * x + static_cast<std::int64_t>((morton >> (2 * bit)) & 1);
-    y = 2 * y + static_cast<std::int64_t>((morton >> (2 * bit + 1)) & 1);
-  }
-  return {x, y};
-}
-
-// Every tile of one hemisphere, read by walking its subtrees from the root subtree through
-// child subtree availability; `read` collects the subtree files opened.
+// Every tile of one hemisphere, read by walking its subtrees (test::readImplicitTiles).
 TileMap decodeHemisphere(const std::vector<ImplicitFile>& files, const std::string& hemisphere,
                          int subtree_levels, std::set<std::string>& read) {
+  const std::map<std::string, std::size_t> components{{"geometricError", 1}, {"boundingRegion", 6}};
+  const test::ImplicitTiles decoded = test::readImplicitTiles(
+      [&](const std::string& path) {
+        REQUIRE(hasFile(files, path));
+        return fileBytes(files, path);
+      },
+      hemisphere, subtree_levels, components, read);
   TileMap tiles;
-  std::uint64_t tile_bits = 0;
-  for (int level = 0; level < subtree_levels; ++level) tile_bits += std::uint64_t{1} << (2 * level);
-  const std::uint64_t child_bits = std::uint64_t{1} << (2 * subtree_levels);
-  std::vector<std::tuple<int, std::int64_t, std::int64_t>> open{{0, 0, 0}};
-  while (!open.empty()) {
-    const auto [root_level, root_x, root_y] = open.back();
-    open.pop_back();
-    const std::string path = "subtrees/" + hemisphere + "/" + std::to_string(root_level) + "/" +
-                             std::to_string(root_x) + "/" + std::to_string(root_y) + ".subtree";
-    INFO(path);
-    REQUIRE(hasFile(files, path));
-    CHECK(read.insert(path).second);
-    const Subtree subtree = decodeSubtree(fileBytes(files, path));
-    const nlohmann::json& json = subtree.json;
-    const nlohmann::json& table =
-        json["propertyTables"].at(json["tileMetadata"].get<std::size_t>());
-    CHECK(table["class"] == "tile");
-    const std::size_t error_view = table["properties"]["geometricError"]["values"];
-    const std::size_t region_view = table["properties"]["boundingRegion"]["values"];
-    const bool has_content = json.contains("contentAvailability");
-    // A subtree's root tile is available (it was reached as an available child subtree).
-    CHECK(availabilityBit(subtree, json["tileAvailability"], tile_bits, 0));
-
-    std::uint64_t bit = 0;
-    std::size_t entity = 0;
-    for (int level = 0; level < subtree_levels; ++level) {
-      for (std::uint64_t morton = 0; morton < (std::uint64_t{1} << (2 * level)); ++morton, ++bit) {
-        const bool available = availabilityBit(subtree, json["tileAvailability"], tile_bits, bit);
-        const bool content =
-            has_content && availabilityBit(subtree, json["contentAvailability"][0], tile_bits, bit);
-        CHECK((available || !content));
-        if (!available) continue;
-        const auto [x, y] = fromMorton(morton, level);
-        TileValues values;
-        values.content = content;
-        values.geometric_error_m = float64At(subtree, error_view, entity);
-        for (std::size_t i = 0; i < 6; ++i) {
-          values.region[i] = float64At(subtree, region_view, 6 * entity + i);
-        }
-        ++entity;
-        const TileCoordinates coordinates{hemisphere, root_level + level,
-                                          (root_x << level) + x, (root_y << level) + y};
-        CHECK(tiles.emplace(coordinates, values).second);
-      }
-    }
-    CHECK(table["count"] == entity);
-    CHECK(viewBytes(subtree, error_view).size() == 8 * entity);
-    CHECK(viewBytes(subtree, region_view).size() == 48 * entity);
-    for (std::uint64_t morton = 0; morton < child_bits; ++morton) {
-      if (!availabilityBit(subtree, json["childSubtreeAvailability"], child_bits, morton)) continue;
-      const auto [x, y] = fromMorton(morton, subtree_levels);
-      open.emplace_back(root_level + subtree_levels, (root_x << subtree_levels) + x,
-                        (root_y << subtree_levels) + y);
-    }
+  for (const auto& [c, tile] : decoded) {
+    TileValues values;
+    values.content = tile.content;
+    values.geometric_error_m = tile.properties.at("geometricError").at(0);
+    for (std::size_t i = 0; i < 6; ++i) values.region[i] = tile.properties.at("boundingRegion").at(i);
+    tiles.emplace(TileCoordinates{hemisphere, c.level, c.x, c.y}, values);
   }
   return tiles;
 }

@@ -1,12 +1,14 @@
 // `terratiles build --format quantized-mesh` on a real raster: the layer a CesiumTerrainProvider
 // reads, every tile decoded by loaders.gl, and the seams between tiles.
 #include <doctest/doctest.h>
+#include <GeographicLib/Geocentric.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <numbers>
 #include <random>
 #include <set>
 
@@ -15,6 +17,7 @@
 #include "formats/dem/read_dem.h"
 #include "formats/geoid/read_geoid.h"
 #include "formats/quantized_mesh/write_quantized_mesh.h"
+#include "tileset/implicit_tileset.h"
 #include "src/geo/crs_transform.h"
 #include "tests/test_support.h"
 
@@ -380,4 +383,132 @@ TEST_CASE("build --format quantized-mesh --fill ETOPO5: outside the data, ETOPO5
   CHECK(projected.err.find("the fill DEM is in EPSG:2056; expected WGS84 longitude and latitude") != std::string::npos);
   CHECK_FALSE(fs::exists(dir / "a"));
   CHECK_FALSE(fs::exists(dir / "b"));
+}
+
+TEST_CASE("build --format terrain: the quantized-mesh layer's tiles as 3D Tiles terrain, metadata true to each tile") {
+  test::TempDir dir;
+  const std::string raster = test::sharedData("srtm3_N57E011_4326.tif");
+  const std::string out = dir / "terrain", layer = dir / "layer";
+  const auto built = runTerratiles({"build", raster, "-o", out, "--format", "terrain", "--tin-max-error", "2", "-q"});
+  REQUIRE_MESSAGE(built.exit_code == 0, built.err);
+  REQUIRE(runTerratiles({"build", raster, "-o", layer, "--format", "quantized-mesh", "--tin-max-error", "2", "-q"})
+              .exit_code == 0);
+  std::ifstream tileset_file(out + "/tileset.json");
+  const json tileset = json::parse(tileset_file);
+  const json& zooms = tileset["extras"]["terratiles"]["zooms"];
+  CHECK(tileset["asset"]["version"] == "1.1");
+  // What Cesium3DTilesTerrainProvider reads: the two hemispheres' implicit quadtrees as the
+  // root's children, west first, and the tile metadata by semantic.
+  REQUIRE(tileset["root"]["children"].size() == 2);
+  const char* hemispheres[2] = {"west", "east"};
+  for (int h = 0; h < 2; ++h) {
+    const json& child = tileset["root"]["children"][h];
+    CHECK(child["implicitTiling"]["subdivisionScheme"] == "QUADTREE");
+    CHECK(child["implicitTiling"]["availableLevels"] == zooms.size());
+    CHECK(child["content"]["uri"] == std::string("tiles/") + hemispheres[h] + "/{level}/{x}/{y}.glb");
+    CHECK(child["boundingVolume"]["region"][0].get<double>() == (h == 0 ? -std::numbers::pi : 0.0));
+  }
+  const json& properties = tileset["schema"]["classes"]["tile"]["properties"];
+  const std::map<std::string, std::string> semantics{{"minimumHeight", "TILE_MINIMUM_HEIGHT"},
+                                                     {"maximumHeight", "TILE_MAXIMUM_HEIGHT"},
+                                                     {"boundingSphere", "TILE_BOUNDING_SPHERE"},
+                                                     {"horizonOcclusionPoint", "TILE_HORIZON_OCCLUSION_POINT"},
+                                                     {"geometricError", "TILE_GEOMETRIC_ERROR"}};
+  for (const auto& [name, semantic] : semantics) CHECK(properties[name]["semantic"] == semantic);
+  const std::map<std::string, std::size_t> components{
+      {"minimumHeight", 1}, {"maximumHeight", 1}, {"boundingSphere", 4}, {"horizonOcclusionPoint", 3}, {"geometricError", 1}};
+  const auto bytesOf = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    REQUIRE_MESSAGE(in, "no file " << path);
+    return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in), {});
+  };
+  std::set<std::string> read;
+  test::ImplicitTiles tiles;
+  for (const char* h : hemispheres) {
+    tiles.merge(test::readImplicitTiles([&](const std::string& path) { return bytesOf(out + "/" + path); }, h, 6,
+                                        components, read));
+  }
+
+  // The same tiles as the quantized-mesh layer (TMS keys), each with content.
+  std::set<std::string> layer_tiles, glb_tiles, implicit_tiles;
+  for (const auto& entry : fs::recursive_directory_iterator(layer)) {
+    if (entry.path().extension() == ".terrain") layer_tiles.insert(fs::relative(entry.path(), layer).replace_extension().string());
+  }
+  for (const auto& entry : fs::recursive_directory_iterator(out + "/tiles")) {
+    if (entry.path().extension() == ".glb") glb_tiles.insert(fs::relative(entry.path(), out).string());
+  }
+  std::map<std::tuple<int, std::int64_t, std::int64_t>, test::TerrainGlbRead> decoded;  // TMS key -> tile
+  for (const auto& [c, tile] : tiles) {
+    CHECK(tile.content);
+    const std::int64_t x = c.x + (c.hemisphere << c.level);
+    implicit_tiles.insert(std::to_string(c.level) + "/" + std::to_string(x) + "/" + std::to_string(c.y));
+    decoded.emplace(std::tuple{c.level, x, c.y}, test::readTerrainGlb(bytesOf(out + "/" + implicitFilePath("tiles", c, "glb"))));
+  }
+  CHECK(implicit_tiles == layer_tiles);
+  CHECK(glb_tiles.size() == tiles.size());
+  CHECK(tiles.size() == 33);
+
+  // Every tile's metadata holds what it decodes to.
+  const GeographicLib::Geocentric& earth = GeographicLib::Geocentric::WGS84();
+  std::size_t tiles_culled_from_somewhere = 0;
+  for (const auto& [c, tile] : tiles) {
+    CAPTURE(c.level);
+    CAPTURE(c.x);
+    CAPTURE(c.y);
+    const test::TerrainGlbRead& glb = decoded.at({c.level, c.x + (c.hemisphere << c.level), c.y});
+    const auto& p = tile.properties;
+    double low = 1e300, high = -1e300;
+    const EcefPoint centre{p.at("boundingSphere")[0], p.at("boundingSphere")[1], p.at("boundingSphere")[2]};
+    for (const EcefPoint& v : glb.positions) {
+      double lat = 0, lon = 0, h = 0;
+      earth.Reverse(v.x, v.y, v.z, lat, lon, h);
+      low = std::min(low, h);
+      high = std::max(high, h);
+      CHECK(std::hypot(v.x - centre.x, v.y - centre.y, v.z - centre.z) <= p.at("boundingSphere")[3]);
+    }
+    CHECK(std::fabs(p.at("minimumHeight")[0] - low) < 1e-6);
+    CHECK(std::fabs(p.at("maximumHeight")[0] - high) < 1e-6);
+    CHECK(p.at("geometricError")[0] == zooms[c.level]["max_error_m"].get<double>());
+    const EcefPoint occlusion{p.at("horizonOcclusionPoint")[0], p.at("horizonOcclusionPoint")[1],
+                              p.at("horizonOcclusionPoint")[2]};
+    const test::HorizonCulling culling = test::cullByHorizonPoint(occlusion, glb.positions);
+    CHECK(culling.vertices_seen_when_culled == 0);
+    tiles_culled_from_somewhere += culling.cameras_culling > 0;
+  }
+  // Most points cull their tile from some of the cameras (a tile spanning too much of the globe
+  // is seen by every camera near its horizon): not a far point everywhere.
+  MESSAGE(tiles_culled_from_somewhere << " of " << tiles.size() << " tiles culled by their point from some camera");
+  CHECK(tiles_culled_from_somewhere >= tiles.size() / 2);
+
+  // Neighbours meet: the vertices on a shared side pair up in the edge lists' order, within
+  // one position step of each other (each tile quantises in its own frame; clients cover the
+  // rest with skirts).
+  std::size_t shared_sides = 0;
+  double worst_m = 0;
+  for (const auto& [key, glb] : decoded) {
+    const auto [zoom, x, y] = key;
+    const auto step = [](const test::TerrainGlbRead& t) {
+      const auto m = test::tileTransform(t.glb.gltf);
+      return std::hypot(m[0][0], m[1][0], m[2][0]) / 65535;
+    };
+    for (const auto& [other_key, mine, theirs] :
+         {std::tuple{std::tuple{zoom, x + 1, y}, 2, 0}, std::tuple{std::tuple{zoom, x, y + 1}, 3, 1}}) {
+      const auto neighbour = decoded.find(other_key);
+      if (neighbour == decoded.end()) continue;
+      ++shared_sides;
+      const std::vector<std::uint32_t>& a = glb.edges[mine];  // east N->S, north W->E
+      const std::vector<std::uint32_t>& b = neighbour->second.edges[theirs];  // west S->N, south E->W
+      REQUIRE(a.size() == b.size());
+      const double tolerance = std::sqrt(3.0) / 2 * (step(glb) + step(neighbour->second));
+      for (std::size_t i = 0; i < a.size(); ++i) {
+        const EcefPoint& pa = glb.positions[a[i]];
+        const EcefPoint& pb = neighbour->second.positions[b[b.size() - 1 - i]];
+        const double d = std::hypot(pa.x - pb.x, pa.y - pb.y, pa.z - pb.z);
+        worst_m = std::max(worst_m, d / tolerance);
+        CHECK(d <= tolerance);
+      }
+    }
+  }
+  MESSAGE("shared sides " << shared_sides << ", farthest pair at " << worst_m << " of its tolerance");
+  CHECK(shared_sides >= 20);
 }
