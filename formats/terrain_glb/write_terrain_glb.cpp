@@ -136,39 +136,55 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
   }
   for (std::uint32_t& v : triangles) v = remap[v];
 
-  // The tile's frame: east, north, up at the centre of its rectangle on the ellipsoid.
-  const double lon0 = (r.west + r.east) / 2 * kDegree, lat0 = (r.south + r.north) / 2 * kDegree;
-  const Vector3 east{-std::sin(lon0), std::cos(lon0), 0};
-  const Vector3 north{-std::sin(lat0) * std::cos(lon0), -std::sin(lat0) * std::sin(lon0), std::cos(lat0)};
-  const Vector3 up{std::cos(lat0) * std::cos(lon0), std::cos(lat0) * std::sin(lon0), std::sin(lat0)};
-  EcefPoint origin;
-  {
-    const GeodeticPoint centre{(r.west + r.east) / 2, (r.south + r.north) / 2, 0};
-    geodeticToEcef(std::span(&centre, 1), std::span(&origin, 1));
-  }
   std::vector<GeodeticPoint> used(count);
   for (std::size_t i = 0; i < count; ++i) used[i] = mesh.vertices[source_vertex[i]];
   std::vector<EcefPoint> ecef(count);
   geodeticToEcef(used, ecef);
+
+  // The tile's frame: east, north, up at the centre of its rectangle on the ellipsoid.
+  const double lon0 = (r.west + r.east) / 2 * kDegree, lat0 = (r.south + r.north) / 2 * kDegree;
+  Vector3 east{-std::sin(lon0), std::cos(lon0), 0};
+  Vector3 north{-std::sin(lat0) * std::cos(lon0), -std::sin(lat0) * std::sin(lon0), std::cos(lat0)};
+  Vector3 up{std::cos(lat0) * std::cos(lon0), std::cos(lat0) * std::sin(lon0), std::sin(lat0)};
   std::vector<Vector3> local(count);
-  Vector3 low{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-              std::numeric_limits<double>::infinity()};
-  Vector3 high{-low.x, -low.y, -low.z};
-  for (std::size_t i = 0; i < count; ++i) {
-    const Vector3 d{ecef[i].x - origin.x, ecef[i].y - origin.y, ecef[i].z - origin.z};
-    local[i] = {dot(d, east), dot(d, north), dot(d, up)};
-    low = {std::min(low.x, local[i].x), std::min(low.y, local[i].y), std::min(low.z, local[i].z)};
-    high = {std::max(high.x, local[i].x), std::max(high.y, local[i].y), std::max(high.z, local[i].z)};
+  Vector3 low, high;
+  const auto placeInFrame = [&] {
+    low = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+           std::numeric_limits<double>::infinity()};
+    high = {-low.x, -low.y, -low.z};
+    for (std::size_t i = 0; i < count; ++i) {
+      const Vector3 d{ecef[i].x, ecef[i].y, ecef[i].z};
+      local[i] = {dot(d, east), dot(d, north), dot(d, up)};
+      low = {std::min(low.x, local[i].x), std::min(low.y, local[i].y), std::min(low.z, local[i].z)};
+      high = {std::max(high.x, local[i].x), std::max(high.y, local[i].y), std::max(high.z, local[i].z)};
+    }
+  };
+  placeInFrame();
+  // One scale for the three axes (the cube's side, the longest extent): CesiumJS turns normals
+  // with the node matrix, scale included, so a flatter box would flatten every stored normal
+  // towards its up axis and lose the slopes in 8 bits. The step is the tile's width over 65535.
+  double side = std::max({high.x - low.x, high.y - low.y, high.z - low.z, 1e-3});
+  // The unit cube to ECEF: M = [R side | R low], R's columns the frame's axes.
+  const auto translationOf = [&] {
+    return Vector3{east.x * low.x + north.x * low.y + up.x * low.z, east.y * low.x + north.y * low.y + up.y * low.z,
+                   east.z * low.x + north.z * low.y + up.z * low.z};
+  };
+  Vector3 translation = translationOf();
+  // The glTF validator (and so the 3d-tiles-validator) takes a node matrix for decomposable
+  // into translation, rotation and scale when its recomposition (in float32) has the same
+  // largest column sum. That holds when the translation column is the largest (it is copied
+  // exactly): always but for tiles of a sixth of the globe and more (zooms 0-2). Those get an
+  // ECEF-aligned cube (glTF axes, no rotation) whose side is a power of two, which recomposes
+  // exactly.
+  if (std::fabs(translation.x) + std::fabs(translation.y) + std::fabs(translation.z) <= 1.1 * std::sqrt(3.0) * side) {
+    east = {1, 0, 0};    // glTF x
+    north = {0, 0, 1};   // glTF y (up in glTF)
+    up = {0, -1, 0};     // glTF z
+    placeInFrame();
+    side = std::exp2(std::ceil(std::log2(std::max({high.x - low.x, high.y - low.y, high.z - low.z, 1e-3}))));
+    translation = translationOf();
   }
-  // One scale for the three axes (the box's longest side): CesiumJS turns normals with the
-  // node matrix, scale included, so a flatter box would flatten every stored normal towards
-  // its up axis and lose the slopes in 8 bits. The step is the tile's width over 65535.
-  const double side = std::max({high.x - low.x, high.y - low.y, high.z - low.z, 1e-3});
   const Vector3 scale{side, side, side};
-  // The unit box to ECEF: M = [R diag(scale) | origin + R low], R's columns east, north, up.
-  const Vector3 translation{origin.x + east.x * low.x + north.x * low.y + up.x * low.z,
-                            origin.y + east.y * low.x + north.y * low.y + up.y * low.z,
-                            origin.z + east.z * low.x + north.z * low.y + up.z * low.z};
   const double m[3][4] = {{east.x * scale.x, north.x * scale.y, up.x * scale.z, translation.x},
                           {east.y * scale.x, north.y * scale.y, up.y * scale.z, translation.y},
                           {east.z * scale.x, north.z * scale.y, up.z * scale.z, translation.z}};

@@ -11,6 +11,9 @@
 //              side over 65535, is the position quantisation: 0.6 m for a zoom-9 tile (0.35
 //              degrees), 7.5 cm at zoom 12. One scale for all axes because CesiumJS turns
 //              normals with the matrix, scale included: a flatter box would flatten them.
+//              Tiles of a sixth of the globe and more (zooms 0-2) use a cube aligned with
+//              glTF's axes whose side is a power of two instead, so that the glTF validator's
+//              float32 TRS decomposition check of the node matrix holds.
 //   NORMAL     BYTE normalised VEC3, stride 4, EXT_meshopt_compression's OCTAHEDRAL filter
 //              (8 bits), the level's normal in the tile's ENU frame.
 //   indices    triangles, counter-clockwise seen from above; UNSIGNED_SHORT up to 65535

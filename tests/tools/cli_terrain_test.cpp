@@ -445,6 +445,12 @@ TEST_CASE("build --format terrain: the quantized-mesh layer's tiles as 3D Tiles 
     decoded.emplace(std::tuple{c.level, x, c.y}, test::readTerrainGlb(bytesOf(out + "/" + implicitFilePath("tiles", c, "glb"))));
   }
   CHECK(implicit_tiles == layer_tiles);
+  const test::GltfValidation validation = test::validateGltfTree(out + "/tiles");
+  CAPTURE(validation.report);
+  REQUIRE_MESSAGE(validation.ran, "the glTF validator did not run: run the README test set-up");
+  CHECK(validation.files == static_cast<int>(glb_tiles.size()));
+  CHECK(validation.errors == 0);
+  CHECK(validation.warnings == 0);
   CHECK(glb_tiles.size() == tiles.size());
   CHECK(tiles.size() == 33);
 
