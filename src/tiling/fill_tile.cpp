@@ -95,6 +95,17 @@ TerrainTileMesh fillTile(const TerrainTileMesh& data, std::int32_t grid_cells,
   }
   TerrainTileMesh tile = data;
   const TileBounds& r = data.rectangle;
+  // A tile the data covers whole (its triangles' area is the rectangle's; a level cut to a
+  // tile has no overlaps) needs no fill: most tiles of a DEM's interior, all of a global one.
+  long double covered = 0;
+  for (std::size_t t = 0; t < data.triangles.size(); t += 3) {
+    const GeodeticPoint& a = data.vertices[data.triangles[t]];
+    const GeodeticPoint& b = data.vertices[data.triangles[t + 1]];
+    const GeodeticPoint& c = data.vertices[data.triangles[t + 2]];
+    covered += std::fabs(area2(a.lon_deg, a.lat_deg, b.lon_deg, b.lat_deg, c.lon_deg, c.lat_deg));
+  }
+  const long double rectangle = 2.0L * (r.east - r.west) * (r.north - r.south);
+  if (std::fabs(covered - rectangle) <= 1e-12L * rectangle) return tile;
   const bool with_normals = !data.normals.empty() || data.vertices.empty();
   const DataCover cover(data);
 

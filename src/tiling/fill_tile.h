@@ -11,7 +11,8 @@
 // zoom that share a side put the same grid points on it (the same fractions of it) and the
 // same data vertices (clipToTile), so they meet there vertex for vertex.
 //
-// Fill vertices get the ellipsoid's normal when the tile has normals.
+// Fill vertices get the ellipsoid's normal when the tile has normals. A tile the data covers
+// whole (its triangles' area is the rectangle's to 1e-12) comes back as it is, untriangulated.
 
 #include <cstdint>
 #include <functional>
