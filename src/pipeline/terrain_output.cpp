@@ -1,5 +1,7 @@
 #include "src/pipeline/terrain_output.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -22,20 +24,59 @@
 #include "src/pipeline/tile_output.h"
 #include "src/tiling/clip_to_tile.h"
 #include "src/tiling/fill_tile.h"
+#include "src/tin/measure_tin.h"
 #include "tileset/implicit_tileset.h"
 
 namespace terratiles {
 namespace {
 
-// A level on the globe: longitude, latitude, ellipsoidal height and the level's normals.
-GeodeticMesh levelOnGlobe(const TinMesh& level, const DemOnGlobe& globe) {
+// A level on the globe: longitude, latitude, ellipsoidal height and the level's normals;
+// `ecef` receives its vertices in ECEF.
+GeodeticMesh levelOnGlobe(const TinMesh& level, const DemOnGlobe& globe, std::vector<EcefPoint>& ecef) {
   GeodeticMesh mesh;
   mesh.vertices.resize(level.vertices.size());
-  std::vector<EcefPoint> ecef(level.vertices.size());
+  ecef.resize(level.vertices.size());
   globe.place(level.vertices, mesh.vertices, ecef);
-  mesh.normals = levelNormals(level, std::move(ecef));
+  mesh.normals = levelNormals(level, ecef);
   mesh.triangles = level.triangle_indices;
   return mesh;
+}
+
+// Per tile of `zoom` holding valid DEM pixels: the level's error there, the largest vertical
+// offset of the level as drawn from the DEM at those pixels (measureTin's scan, each pixel
+// binned by the longitude and latitude of its vertical).
+std::map<TerrainTileKey, double> tileErrors(const DemOnGlobe& globe, const TinMesh& level,
+                                            std::span<const EcefPoint> ecef, std::int32_t zoom) {
+  const DemGrid& dem = globe.dem();
+  const double size = 180.0 / std::ldexp(1.0, zoom);
+  const std::int64_t columns = std::int64_t{2} << zoom, rows = std::int64_t{1} << zoom;
+  const std::size_t triangles = level.triangle_indices.size() / 3;
+  tbb::enumerable_thread_specific<std::map<TerrainTileKey, double>> per_thread;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles, 4096), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::map<TerrainTileKey, double>& errors = per_thread.local();
+    const auto& idx = level.triangle_indices;
+    for (std::size_t t = range.begin(); t != range.end(); ++t) {
+      const std::uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+      forEachCoveredPixelOnGlobe(globe, level.vertices[a], level.vertices[b], level.vertices[c], ecef[a], ecef[b],
+                                 ecef[c], [&](std::size_t pixel, double offset_m) {
+                                   if (std::isnan(dem.heights_m[pixel])) return true;
+                                   const UnitVector up = globe.up(pixel);
+                                   const double lat = std::asin(std::clamp(up[2], -1.0, 1.0)) * 180 / std::numbers::pi;
+                                   const double lon = std::atan2(up[1], up[0]) * 180 / std::numbers::pi;
+                                   const TerrainTileKey key{
+                                       zoom, std::clamp<std::int64_t>(static_cast<std::int64_t>((lon + 180) / size), 0, columns - 1),
+                                       std::clamp<std::int64_t>(static_cast<std::int64_t>((lat + 90) / size), 0, rows - 1)};
+                                   double& error = errors[key];
+                                   error = std::max(error, std::fabs(offset_m));
+                                   return true;
+                                 });
+    }
+  });
+  std::map<TerrainTileKey, double> errors;
+  for (const auto& part : per_thread) {
+    for (const auto& [key, error] : part) errors[key] = std::max(errors[key], error);
+  }
+  return errors;
 }
 
 // layer.json's `available` for one zoom: the tiles as rectangles (runs of x per row, rows with
@@ -85,7 +126,8 @@ const std::vector<ImplicitTileProperty>& terrainTileProperties() {
        "horizon occlusion point of the tile's decoded vertices, ellipsoid-scaled ECEF", "VEC3", 0},
       {"geometricError", "TILE_GEOMETRIC_ERROR",
        "the largest distance, in metres, between the DEM and the level the tile's zoom shows, measured along "
-       "the vertical at every valid pixel (the fill outside the data is not measured)"}};
+       "the vertical at every valid pixel in the tile; a tile without DEM pixels (fill only, not measured) "
+       "carries the level's error"}};
   return properties;
 }
 
@@ -199,10 +241,11 @@ void writeTerrainLayer(const std::vector<Level>& levels, std::int32_t max_zoom, 
   std::vector<ZoomSummary> zoom_summaries;
   std::size_t shown_level = levels.size();
   GeodeticMesh mesh;
+  std::vector<EcefPoint> mesh_ecef;
   for (std::int32_t zoom = max_zoom; zoom >= 0; --zoom) {
     const std::size_t l = std::min(levels.size() - 1, static_cast<std::size_t>(max_zoom - zoom));
     if (l != shown_level) {
-      mesh = levelOnGlobe(levels[l].mesh, globe);
+      mesh = levelOnGlobe(levels[l].mesh, globe, mesh_ecef);
       shown_level = l;
     }
     GeodeticMesh snapped = mesh;
@@ -247,6 +290,9 @@ void writeTerrainLayer(const std::vector<Level>& levels, std::int32_t max_zoom, 
         tiles[i] = TerrainTileMesh();
       });
       for (const TerrainGlb& glb : glbs) position_step_m = std::max(position_step_m, glb.position_step_m);
+      // Each tile's own error where it holds DEM pixels; elsewhere (fill only, not measured)
+      // the level's.
+      const std::map<TerrainTileKey, double> errors = tileErrors(globe, levels[l].mesh, mesh_ecef, zoom);
       for (std::size_t i = 0; i < keys.size(); ++i) {
         // Implicit coordinates: the hemisphere's column, the row from the south (as TMS).
         const std::int64_t rows = std::int64_t{1} << zoom;
@@ -258,7 +304,7 @@ void writeTerrainLayer(const std::vector<Level>& levels, std::int32_t max_zoom, 
             {c, true,
              {t.minimum_height_m, t.maximum_height_m, k.sphere_center.x, k.sphere_center.y, k.sphere_center.z,
               k.sphere_radius_m, k.horizon_occlusion_point.x, k.horizon_occlusion_point.y, k.horizon_occlusion_point.z,
-              levels[l].error.max_error_m}});
+              errors.count(keys[i]) ? errors.at(keys[i]) : levels[l].error.max_error_m}});
       }
     }
     ZoomSummary zoom_summary;
