@@ -309,20 +309,25 @@ TEST_CASE("build --format quantized-mesh refuses what it cannot write, with exit
   }
 }
 
-TEST_CASE("CesiumJS takes the quantized-mesh layers of SRTM N57E011 and Interlaken as its terrain") {
-  checkInCesium("quantized-mesh", test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"},
-                "/usr/share/proj/egm96_15.gtx", "srtm_terrain");
+namespace {
+
+// checkInCesium on both rasters: N57E011 at 2 m (EGM96), Interlaken at 1 m (CHGeo2004).
+void checkBothRastersInCesium(const std::string& format, const std::string& screenshot_suffix) {
+  checkInCesium(format, test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"},
+                "/usr/share/proj/egm96_15.gtx", "srtm_terrain" + screenshot_suffix);
   const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
-  checkInCesium("quantized-mesh", test::sharedData("ch_dhm25_interlaken_25m_2056.tif"),
-                {"--tin-max-error", "1", "--geoid", chgeo}, chgeo, "interlaken_terrain");
+  checkInCesium(format, test::sharedData("ch_dhm25_interlaken_25m_2056.tif"), {"--tin-max-error", "1", "--geoid", chgeo},
+                chgeo, "interlaken_terrain" + screenshot_suffix);
+}
+
+}  // namespace
+
+TEST_CASE("CesiumJS takes the quantized-mesh layers of SRTM N57E011 and Interlaken as its terrain") {
+  checkBothRastersInCesium("quantized-mesh", "");
 }
 
 TEST_CASE("CesiumJS takes the 3D Tiles terrain of SRTM N57E011 and Interlaken as its terrain") {
-  checkInCesium("terrain", test::sharedData("srtm3_N57E011_4326.tif"), {"--tin-max-error", "2"},
-                "/usr/share/proj/egm96_15.gtx", "srtm_terrain_3dtiles");
-  const std::string chgeo = test::sharedData("geoid/ch_swisstopo_chgeo2004_ETRS89_LN02.tif");
-  checkInCesium("terrain", test::sharedData("ch_dhm25_interlaken_25m_2056.tif"),
-                {"--tin-max-error", "1", "--geoid", chgeo}, chgeo, "interlaken_terrain_3dtiles");
+  checkBothRastersInCesium("terrain", "_3dtiles");
 }
 
 TEST_CASE("build --format quantized-mesh --fill ETOPO5: outside the data, ETOPO5's heights above EGM96") {
