@@ -16,7 +16,6 @@
 namespace terratiles {
 namespace {
 
-constexpr double kDegree = std::numbers::pi / 180.0;
 constexpr std::uint32_t kPositionMax = 65535;
 constexpr int kArrayBuffer = 34962;
 constexpr int kElementArrayBuffer = 34963;
@@ -120,7 +119,20 @@ void appendUint32(std::vector<std::uint8_t>& out, std::uint32_t value) {
 
 }  // namespace
 
-TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& generator, DecodedTerrainGlb* decoded) {
+double terrainTileExtent(const TerrainTileMesh& mesh) {
+  std::vector<EcefPoint> ecef(mesh.vertices.size());
+  geodeticToEcef(mesh.vertices, ecef);
+  if (ecef.empty()) return 0;
+  EcefPoint lo = ecef[0], hi = ecef[0];
+  for (const EcefPoint& p : ecef) {
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  return std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+}
+
+TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& generator, double lattice_step_m,
+                            DecodedTerrainGlb* decoded) {
   validate(mesh);
   const TileBounds& r = mesh.rectangle;
 
@@ -141,50 +153,30 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
   std::vector<EcefPoint> ecef(count);
   geodeticToEcef(used, ecef);
 
-  // The tile's frame: east, north, up at the centre of its rectangle on the ellipsoid.
-  const double lon0 = (r.west + r.east) / 2 * kDegree, lat0 = (r.south + r.north) / 2 * kDegree;
-  Vector3 east{-std::sin(lon0), std::cos(lon0), 0};
-  Vector3 north{-std::sin(lat0) * std::cos(lon0), -std::sin(lat0) * std::sin(lon0), std::cos(lat0)};
-  Vector3 up{std::cos(lat0) * std::cos(lon0), std::cos(lat0) * std::sin(lon0), std::sin(lat0)};
+  // The cube in glTF's axes (x, y, z = ECEF x, z, -y): its corner on a multiple of the step,
+  // so that every tile quantising on the same step puts a vertex on the same lattice point.
+  const Vector3 east{1, 0, 0}, north{0, 0, 1}, up{0, -1, 0};  // the cube's axes in ECEF
   std::vector<Vector3> local(count);
-  Vector3 low, high;
-  const auto placeInFrame = [&] {
-    low = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-           std::numeric_limits<double>::infinity()};
-    high = {-low.x, -low.y, -low.z};
-    for (std::size_t i = 0; i < count; ++i) {
-      const Vector3 d{ecef[i].x, ecef[i].y, ecef[i].z};
-      local[i] = {dot(d, east), dot(d, north), dot(d, up)};
-      low = {std::min(low.x, local[i].x), std::min(low.y, local[i].y), std::min(low.z, local[i].z)};
-      high = {std::max(high.x, local[i].x), std::max(high.y, local[i].y), std::max(high.z, local[i].z)};
-    }
-  };
-  placeInFrame();
-  // One scale for the three axes (the cube's side, the longest extent): CesiumJS turns normals
-  // with the node matrix, scale included, so a flatter box would flatten every stored normal
-  // towards its up axis and lose the slopes in 8 bits. The step is the tile's width over 65535.
-  double side = std::max({high.x - low.x, high.y - low.y, high.z - low.z, 1e-3});
-  // The unit cube to ECEF: M = [R side | R low], R's columns the frame's axes.
-  const auto translationOf = [&] {
-    return Vector3{east.x * low.x + north.x * low.y + up.x * low.z, east.y * low.x + north.y * low.y + up.y * low.z,
-                   east.z * low.x + north.z * low.y + up.z * low.z};
-  };
-  Vector3 translation = translationOf();
-  // The glTF validator (and so the 3d-tiles-validator) takes a node matrix for decomposable
-  // into translation, rotation and scale when its recomposition (in float32) has the same
-  // largest column sum. That holds when the translation column is the largest (it is copied
-  // exactly): always but for tiles of a sixth of the globe and more (zooms 0-2). Those get an
-  // ECEF-aligned cube (glTF axes, no rotation) whose side is a power of two, which recomposes
-  // exactly.
-  if (std::fabs(translation.x) + std::fabs(translation.y) + std::fabs(translation.z) <= 1.1 * std::sqrt(3.0) * side) {
-    east = {1, 0, 0};    // glTF x
-    north = {0, 0, 1};   // glTF y (up in glTF)
-    up = {0, -1, 0};     // glTF z
-    placeInFrame();
-    side = std::exp2(std::ceil(std::log2(std::max({high.x - low.x, high.y - low.y, high.z - low.z, 1e-3}))));
-    translation = translationOf();
+  for (std::size_t i = 0; i < count; ++i) local[i] = {ecef[i].x, ecef[i].z, -ecef[i].y};
+  const double extent = terrainTileExtent(mesh);
+  const double step = lattice_step_m > 0 ? lattice_step_m : std::max(extent, 1e-3) / (kPositionMax - 1);
+  if (!(extent <= step * (kPositionMax - 1))) {
+    throw Error(ErrorCode::Internal, "3D Tiles terrain tile: extent " + std::to_string(extent) + " m exceeds " +
+                                         std::to_string(kPositionMax - 1) + " steps of " + std::to_string(step) + " m");
   }
-  const Vector3 scale{side, side, side};
+  Vector3 low{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+              std::numeric_limits<double>::infinity()};
+  for (const Vector3& v : local) low = {std::min(low.x, v.x), std::min(low.y, v.y), std::min(low.z, v.z)};
+  // Lattice indices: of the corner, and of each vertex (from its coordinates alone, so two
+  // tiles give a shared vertex the same one).
+  const Vector3 low_index{std::floor(low.x / step), std::floor(low.y / step), std::floor(low.z / step)};
+  low = {low_index.x * step, low_index.y * step, low_index.z * step};
+  const double cube_side = step * kPositionMax;
+  // The unit cube to ECEF: M = [R side | R low], R's columns the cube's axes. In glTF's frame
+  // the node matrix is side times the identity plus a translation: the glTF validator's TRS
+  // check (a float32 decomposition) recomposes it exactly.
+  const Vector3 translation{low.x, -low.z, low.y};
+  const Vector3 scale{cube_side, cube_side, cube_side};
   const double m[3][4] = {{east.x * scale.x, north.x * scale.y, up.x * scale.z, translation.x},
                           {east.y * scale.x, north.y * scale.y, up.y * scale.z, translation.y},
                           {east.z * scale.x, north.z * scale.y, up.z * scale.z, translation.z}};
@@ -193,12 +185,13 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
   std::vector<std::uint16_t> positions(count * 4, 0);
   std::array<std::uint32_t, 3> q_min{kPositionMax, kPositionMax, kPositionMax}, q_max{0, 0, 0};
   std::vector<EcefPoint> decoded_positions(count);
-  const auto quantise = [](double value, double lo, double size) {
-    return static_cast<std::uint16_t>(std::clamp(std::lround((value - lo) / size * kPositionMax), 0L, long{kPositionMax}));
+  const auto quantise = [step](double value, double corner_index) {
+    return static_cast<std::uint16_t>(
+        std::clamp(std::nearbyint(value / step) - corner_index, 0.0, static_cast<double>(kPositionMax)));
   };
   for (std::size_t i = 0; i < count; ++i) {
-    const std::array<std::uint16_t, 3> q{quantise(local[i].x, low.x, scale.x), quantise(local[i].y, low.y, scale.y),
-                                         quantise(local[i].z, low.z, scale.z)};
+    const std::array<std::uint16_t, 3> q{quantise(local[i].x, low_index.x), quantise(local[i].y, low_index.y),
+                                         quantise(local[i].z, low_index.z)};
     double f[3];
     for (int a = 0; a < 3; ++a) {
       positions[i * 4 + a] = q[a];
@@ -214,7 +207,7 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
 
   TerrainGlb result;
   result.vertices = count;
-  result.position_step_m = side / kPositionMax;
+  result.position_step_m = step;
   result.triangles = triangles.size() / 3;
   result.culling = terrainTileCulling(decoded_positions);
   result.minimum_height_m = std::numeric_limits<double>::infinity();
@@ -266,7 +259,7 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
     accessors.push_back(std::move(accessor));
   }
   if (!mesh.normals.empty()) {
-    // n_stored = R^T n: CesiumJS applies M's linear part (R times the scale) and normalises.
+    // n_stored = R^T n: CesiumJS applies M's linear part (R times the side) and normalises.
     std::vector<float> normals(count * 4, 0.0f);
     for (std::size_t i = 0; i < count; ++i) {
       const auto& n = mesh.normals[source_vertex[i]];

@@ -4,18 +4,17 @@
 // @cesium/engine, since CesiumJS 1.126; issue 17). One GLB, one mesh, one primitive:
 //
 //   POSITION   UNSIGNED_SHORT normalised VEC3 (KHR_mesh_quantization), stride 8: the
-//              vertex's place in a cube in the tile's east-north-up frame (ENU at the centre
-//              of its rectangle on the ellipsoid), 0 .. 65535 along each side, the cube's side
-//              the longest extent of the tile's vertices; the node's matrix takes the unit
-//              cube to ECEF (Y up, as glTF: the client turns Y-up into Z-up). The step, the
-//              side over 65535, is the position quantisation: 0.6 m for a zoom-9 tile (0.35
-//              degrees), 7.5 cm at zoom 12. One scale for all axes because CesiumJS turns
-//              normals with the matrix, scale included: a flatter box would flatten them.
-//              Tiles of a sixth of the globe and more (zooms 0-2) use a cube aligned with
-//              glTF's axes whose side is a power of two instead, so that the glTF validator's
-//              float32 TRS decomposition check of the node matrix holds.
+//              vertex's place on a lattice in glTF's axes (ECEF x, z, -y) of `lattice_step_m`
+//              (a zoom's tiles share one: a vertex two tiles share is on the same lattice
+//              point in both, and decodes the same up to the client's float32 rounding of
+//              q / 65535, 0.4 % of a step), 0 .. 65535 steps from the tile's cube corner, a
+//              lattice point; the node matrix takes the unit cube (side 65535 steps) to ECEF
+//              (Y up, as glTF: the client turns Y-up into Z-up): the side times the identity
+//              and a translation, which the glTF validator's float32 TRS check recomposes
+//              exactly. One scale for all axes also because CesiumJS turns normals with the
+//              matrix, scale included: a flatter box would flatten them.
 //   NORMAL     BYTE normalised VEC3, stride 4, EXT_meshopt_compression's OCTAHEDRAL filter
-//              (8 bits), the level's normal in the tile's ENU frame.
+//              (8 bits), the level's normal in glTF's axes.
 //   indices    triangles, counter-clockwise seen from above; UNSIGNED_SHORT up to 65535
 //              vertices, else UNSIGNED_INT
 //   CESIUM_tile_edges  a primitive extension naming four index accessors: the vertices on
@@ -62,7 +61,13 @@ struct TerrainGlb {
   std::size_t triangles = 0;
 };
 
-TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& generator,
+// The longest extent of the tile's vertices along ECEF's axes: a lattice step of at least
+// extent / 65534 holds the tile.
+double terrainTileExtent(const TerrainTileMesh& mesh);
+
+// `lattice_step_m` 0: the tile's own, terrainTileExtent / 65534. Throws Error(Internal) for a
+// step the tile does not fit in.
+TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& generator, double lattice_step_m = 0,
                             DecodedTerrainGlb* decoded = nullptr);
 
 }  // namespace terratiles

@@ -282,9 +282,13 @@ void writeTerrainLayer(const std::vector<Level>& levels, std::int32_t max_zoom, 
         paths[i] = std::to_string(zoom) + "/" + std::to_string(keys[i].x) + "/" + std::to_string(keys[i].y) + ".terrain";
       }
     } else {
+      // One lattice for the zoom: its step holds the widest tile.
+      std::vector<double> extents(keys.size());
+      tbb::parallel_for(std::size_t{0}, keys.size(), [&](std::size_t i) { extents[i] = terrainTileExtent(tiles[i]); });
+      const double step = std::max(*std::max_element(extents.begin(), extents.end()), 1e-3) / (65535 - 1);
       std::vector<TerrainGlb> glbs(keys.size());
       tbb::parallel_for(std::size_t{0}, keys.size(), [&](std::size_t i) {
-        glbs[i] = encodeTerrainGlb(tiles[i], generator);
+        glbs[i] = encodeTerrainGlb(tiles[i], generator, step);
         triangles[i] = tiles[i].triangles.size() / 3;
         files[i] = std::move(glbs[i].bytes);
         tiles[i] = TerrainTileMesh();

@@ -41,7 +41,7 @@ std::array<std::uint32_t, 3> canonical(std::uint32_t a, std::uint32_t b, std::ui
 void checkTile(const test::SrtmTerrainTile& tile, const std::string& name) {
   CAPTURE(name);
   DecodedTerrainGlb written;
-  const TerrainGlb result = encodeTerrainGlb(tile.mesh, "terratiles test", &written);
+  const TerrainGlb result = encodeTerrainGlb(tile.mesh, "terratiles test", 0, &written);
   const ParsedGlb glb = parseGlb(result.bytes);
   const json& gltf = glb.gltf;
   CHECK(gltf["extensionsRequired"] == json({"EXT_meshopt_compression", "KHR_mesh_quantization"}));
