@@ -155,7 +155,6 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
 
   // The cube in glTF's axes (x, y, z = ECEF x, z, -y): its corner on a multiple of the step,
   // so that every tile quantising on the same step puts a vertex on the same lattice point.
-  const Vector3 east{1, 0, 0}, north{0, 0, 1}, up{0, -1, 0};  // the cube's axes in ECEF
   std::vector<Vector3> local(count);
   for (std::size_t i = 0; i < count; ++i) local[i] = {ecef[i].x, ecef[i].z, -ecef[i].y};
   const double extent = terrainTileExtent(mesh);
@@ -172,14 +171,10 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
   const Vector3 low_index{std::floor(low.x / step), std::floor(low.y / step), std::floor(low.z / step)};
   low = {low_index.x * step, low_index.y * step, low_index.z * step};
   const double cube_side = step * kPositionMax;
-  // The unit cube to ECEF: M = [R side | R low], R's columns the cube's axes. In glTF's frame
-  // the node matrix is side times the identity plus a translation: the glTF validator's TRS
-  // check (a float32 decomposition) recomposes it exactly.
-  const Vector3 translation{low.x, -low.z, low.y};
-  const Vector3 scale{cube_side, cube_side, cube_side};
-  const double m[3][4] = {{east.x * scale.x, north.x * scale.y, up.x * scale.z, translation.x},
-                          {east.y * scale.x, north.y * scale.y, up.y * scale.z, translation.y},
-                          {east.z * scale.x, north.z * scale.y, up.z * scale.z, translation.z}};
+  // The unit cube to ECEF: M = [R side | R low], R's columns the glTF axes in ECEF (1, 0, 0),
+  // (0, 0, 1), (0, -1, 0). In glTF's frame the node matrix is side times the identity plus a
+  // translation: the glTF validator's TRS check (a float32 decomposition) recomposes it exactly.
+  const double m[3][4] = {{cube_side, 0, 0, low.x}, {0, 0, -cube_side, -low.z}, {0, cube_side, 0, low.y}};
 
   // Positions: 16 bits per axis of the box, the fourth component unused.
   std::vector<std::uint16_t> positions(count * 4, 0);
@@ -264,7 +259,7 @@ TerrainGlb encodeTerrainGlb(const TerrainTileMesh& mesh, const std::string& gene
     for (std::size_t i = 0; i < count; ++i) {
       const auto& n = mesh.normals[source_vertex[i]];
       const Vector3 e{n[0], n[1], n[2]};
-      Vector3 v{dot(e, east), dot(e, north), dot(e, up)};
+      Vector3 v{e.x, e.z, -e.y};  // R^T n: glTF's axes
       const double length = std::sqrt(dot(v, v));
       if (length > 0) v = {v.x / length, v.y / length, v.z / length};
       normals[i * 4 + 0] = static_cast<float>(v.x);
